@@ -1,0 +1,87 @@
+"""Unrolled small dense linear algebra on batch arrays.
+
+The systems of snapshot RAIM are tiny (4 to 8 states) and come in batches of millions. Writing
+the Cholesky factorisation out entry by entry on arrays of the batch shape lets XLA fuse the
+whole solve into a few elementwise loops; ``jnp.linalg`` on (B, 4, 4) stacks is several times
+slower on CPU (DESIGN.md, performance notes). Loops below are Python loops over the static
+matrix size, unrolled at trace time.
+"""
+
+import jax.numpy as jnp
+
+#: a pivot smaller than this fraction of its diagonal entry marks the matrix singular: the
+#: column is, to ~1e-10, a combination of the previous ones (condition number beyond ~1e10).
+RELATIVE_PIVOT_TOLERANCE = 1e-10
+
+
+def normal_entries(cols, w):
+    """Entries N[j][k] = sum_l w_l c_j,l c_k,l of the weighted normal matrix.
+
+    Args:
+      cols: K arrays of shape (..., L), the columns of the design matrix.
+      w: weights, (..., L).
+
+    Returns:
+      K x K nested list of arrays of shape (...); symmetric, each entry computed once.
+    """
+    k = len(cols)
+    wc = [w * c for c in cols]
+    n = [[None] * k for _ in range(k)]
+    for i in range(k):
+        for j in range(i + 1):
+            n[i][j] = n[j][i] = jnp.sum(wc[i] * cols[j], axis=-1)
+    return n
+
+
+def cholesky(n):
+    """Unrolled Cholesky factor of a symmetric K x K matrix given as nested lists.
+
+    Returns:
+      (lower, ok): ``lower[i][j]`` for j <= i, and a boolean array, False where a pivot fell
+      below ``RELATIVE_PIVOT_TOLERANCE`` times its diagonal entry (singular or indefinite). Where
+      not ok, the factor holds finite placeholder values: callers mask the results.
+    """
+    k = len(n)
+    lower = [[None] * k for _ in range(k)]
+    ok = None
+    for j in range(k):
+        pivot = n[j][j]
+        for m in range(j):
+            pivot = pivot - lower[j][m] ** 2
+        good = pivot > RELATIVE_PIVOT_TOLERANCE * n[j][j]
+        ok = good if ok is None else ok & good
+        d = jnp.sqrt(jnp.where(good, pivot, 1.0))
+        lower[j][j] = d
+        for i in range(j + 1, k):
+            s = n[i][j]
+            for m in range(j):
+                s = s - lower[i][m] * lower[j][m]
+            lower[i][j] = s / d
+    return lower, ok
+
+
+def cholesky_solve(lower, rhs):
+    """Solve (L L^T) x = rhs for K right-hand-side components given as a list of arrays.
+
+    ``rhs[k]`` may carry extra trailing axes (e.g. one solve per source row, shape (..., L));
+    the factor entries broadcast against them after adding that axis.
+    """
+    k = len(lower)
+    y = [None] * k
+    for i in range(k):
+        s = rhs[i]
+        for m in range(i):
+            s = s - lower[i][m] * y[m]
+        y[i] = s / lower[i][i]
+    x = [None] * k
+    for i in reversed(range(k)):
+        s = y[i]
+        for m in range(i + 1, k):
+            s = s - lower[m][i] * x[m]
+        x[i] = s / lower[i][i]
+    return x
+
+
+def expand_last(entries):
+    """Add a trailing axis to every entry of a nested list (to broadcast over source rows)."""
+    return [[None if e is None else e[..., None] for e in row] for row in entries]

@@ -1,0 +1,150 @@
+"""Chi-square snapshot RAIM slopes and slope HPL, seed 001 section 3.1.
+
+State: [east, north, up, c dt] with one receiver clock shared by GPS and SOPs (seed 001 models
+the SOP clock biases as known first-order polynomials, section 2.3). With
+H = [g, 1], R = diag(sigma^2), B = (H^T R^-1 H)^-1 H^T R^-1 and S = I - H B:
+
+    slope_i = sqrt(B_1i^2 + B_2i^2) sqrt(R_ii) / sqrt(S_ii)          (seed 001, section 3.1)
+    HPL     = slope_max sqrt(lambda_det)                              (seed 001, section 3.1)
+
+B_{:,i} = P h_i / sigma_i^2 with P = (H^T R^-1 H)^-1, so with g_i = P h_i:
+slope_i^2 = w_i (g_i,E^2 + g_i,N^2) / (1 - w_i h_i . g_i), w_i = 1 / sigma_i^2.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from araim import linalg
+from araim.chi2 import lambda_det_table
+from araim.status import Status
+from araim.validate import check_probability
+
+N_STATES = 4  # east, north, up, receiver clock
+
+#: S_ii below this (it lies in [0, 1]) means source i has no redundancy: its fault is
+#: unobservable in the residuals, the slope is unbounded and the HPL is inf.
+REDUNDANCY_TOLERANCE = 1e-9
+
+
+class Slopes(NamedTuple):
+    slopes: jax.Array  # (..., L) slope_i in metres of horizontal error per unit sqrt(lambda)
+    slope_max: jax.Array  # (...)
+    dof: jax.Array  # (...) int: n_valid - 4
+    status: jax.Array  # (...) int8 Status
+
+
+class SlopeHPL(NamedTuple):
+    hpl_m: jax.Array  # (...) inf where status != OK
+    slope_max: jax.Array  # (...)
+    slopes: jax.Array  # (..., L)
+    lambda_det: jax.Array  # (...) non-centrality used (depends on dof)
+    dof: jax.Array  # (...)
+    status: jax.Array  # (...)
+
+
+def _prepare(g, sigma_m, valid):
+    g = jnp.asarray(g, jnp.float64)
+    sigma_m = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64), g.shape[:-1])
+    if valid is None:
+        valid = jnp.ones(g.shape[:-1], bool)
+    valid = jnp.broadcast_to(jnp.asarray(valid, bool), g.shape[:-1])
+    return g, sigma_m, valid
+
+
+def _check_sigma(sigma_m):
+    try:
+        s = np.asarray(sigma_m)
+    except Exception:  # a tracer: checked by the caller outside jit
+        return
+    if not np.all(np.isfinite(s) & (s > 0)):
+        bad = s[~(np.isfinite(s) & (s > 0))].ravel()[0]
+        raise ValueError(f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
+
+
+def _slopes_kernel(g, sigma_m, valid):
+    w = jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)
+    gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
+    one = jnp.ones_like(gx)
+    lower, nonsingular = linalg.cholesky(linalg.normal_entries([gx, gy, gz, one], w))
+    x = linalg.cholesky_solve(linalg.expand_last(lower), [gx, gy, gz, one])
+    s_ii = 1.0 - w * (gx * x[0] + gy * x[1] + gz * x[2] + x[3])
+    redundant = s_ii > REDUNDANCY_TOLERANCE
+    slope2 = w * (x[0] ** 2 + x[1] ** 2) / jnp.where(redundant, s_ii, 1.0)
+    slopes = jnp.where(valid, jnp.where(redundant, jnp.sqrt(slope2), jnp.inf), 0.0)
+
+    n_valid = jnp.sum(valid, axis=-1)
+    dof = n_valid - N_STATES
+    too_few = dof < 1
+    undetectable = jnp.any(valid & ~redundant, axis=-1)
+    status = jnp.where(
+        too_few,
+        Status.TOO_FEW_SOURCES,
+        jnp.where(~nonsingular, Status.SINGULAR_GEOMETRY,
+                  jnp.where(undetectable, Status.UNDETECTABLE_FAULT, Status.OK)),
+    ).astype(jnp.int8)
+    failed = status != Status.OK
+    slopes = jnp.where(failed[..., None] & valid, jnp.inf, slopes)
+    slope_max = jnp.where(failed, jnp.inf, jnp.max(slopes, axis=-1))
+    return slopes, slope_max, dof, status
+
+
+@jax.jit
+def _slopes_jit(g, sigma_m, valid):
+    return Slopes(*_slopes_kernel(g, sigma_m, valid))
+
+
+@jax.jit
+def _slope_hpl_jit(g, sigma_m, valid, lambda_table):
+    slopes, slope_max, dof, status = _slopes_kernel(g, sigma_m, valid)
+    lam = lambda_table[jnp.clip(dof, 0, lambda_table.shape[0] - 1)]
+    ok = status == Status.OK
+    hpl = jnp.where(ok, slope_max * jnp.sqrt(jnp.where(ok, lam, 1.0)), jnp.inf)
+    return SlopeHPL(hpl, slope_max, slopes, jnp.where(ok, lam, jnp.inf), dof, status)
+
+
+def slopes(g, sigma_m, valid=None) -> Slopes:
+    """RAIM slopes of every source, seed 001 section 3.1 (weighted, one receiver clock).
+
+    Args:
+      g: ``(..., L, 3)`` geometry rows from ``geometry.geometry_rows`` (east, north, up).
+      sigma_m: pseudorange *standard deviations* in metres (seed 001's sqrt(R_ii)),
+        broadcastable to ``(..., L)``.
+      valid: ``(..., L)`` bool, the sources used; padding rows are False. Default: all.
+
+    Returns:
+      ``Slopes``: per-source slopes (0 for invalid sources), their maximum, dof and status. Where
+      the status is not OK the maximum is ``inf``.
+    """
+    g, sigma_m, valid = _prepare(g, sigma_m, valid)
+    _check_sigma(sigma_m)
+    return _slopes_jit(g, sigma_m, valid)
+
+
+def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
+    """Slope-based HPL of chi-square snapshot RAIM, seed 001 section 3.1.
+
+    HPL = slope_max sqrt(lambda_det), where lambda_det is the non-centrality of the residual
+    chi-square statistic (dof = n_valid - 4) that gives missed-detection probability P_MD at the
+    threshold set by P_FA (``araim.chi2``).
+
+    Args:
+      g: ``(..., L, 3)`` geometry rows.
+      sigma_m: pseudorange standard deviations in metres (not variances), broadcastable to
+        ``(..., L)``.
+      p_fa, p_md: false-alarm and missed-detection probabilities, Python floats in (0, 1).
+      valid: ``(..., L)`` mask of the sources used.
+
+    Returns:
+      ``SlopeHPL``. ``hpl_m`` is ``inf`` with a ``Status`` where fewer than 5 sources are valid,
+      the geometry is singular, or some source's fault is undetectable; never NaN.
+    """
+    p_fa = check_probability("p_fa", p_fa)
+    p_md = check_probability("p_md", p_md)
+    g, sigma_m, valid = _prepare(g, sigma_m, valid)
+    _check_sigma(sigma_m)
+    n_sources = g.shape[-2]
+    table = lambda_det_table(p_fa, p_md, max(n_sources - N_STATES, 1))
+    return _slope_hpl_jit(g, sigma_m, valid, jnp.asarray(table))

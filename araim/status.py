@@ -1,0 +1,25 @@
+"""Status codes: why a solution or a protection level could not be computed.
+
+Failures are data (DESIGN.md): a batch never raises; the protection level is ``inf`` and the
+status says why. Codes are small integers so they live in integer arrays beside the results.
+When several reasons apply, the lowest non-zero code is reported.
+"""
+
+import enum
+
+
+class Status(enum.IntEnum):
+    OK = 0
+    #: fewer valid sources than states + 1: no redundancy, so no fault can be detected
+    TOO_FEW_SOURCES = 1
+    #: the weighted normal matrix is singular to working precision (degenerate geometry)
+    SINGULAR_GEOMETRY = 2
+    #: a valid source has no redundancy (S_ii ~ 0): a fault on it cannot be detected
+    UNDETECTABLE_FAULT = 3
+    #: the iterated least squares did not meet its step tolerance in the fixed iteration count
+    NOT_CONVERGED = 4
+
+
+def describe(code: int) -> str:
+    """Human-readable name of a status code."""
+    return Status(int(code)).name.lower().replace("_", " ")

@@ -1,0 +1,56 @@
+"""Checks of user-supplied parameters, run before any computation.
+
+Each check raises ``ValueError`` whose message names the field, the value and the valid range,
+so the CLI can print it as one line and exit with status 2.
+"""
+
+import math
+
+
+def check_probability(name: str, value) -> float:
+    """A probability strictly inside (0, 1)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a probability in (0, 1), got {value!r}") from None
+    if not (0.0 < v < 1.0):
+        raise ValueError(f"{name} must be a probability in (0, 1), got {value!r}")
+    return v
+
+
+def check_positive(name: str, value, allow_zero: bool = False) -> float:
+    """A finite positive number (or non-negative with ``allow_zero``)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
+    if not ok:
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
+    return v
+
+
+def check_int(name: str, value, minimum: int, maximum: int | None = None) -> int:
+    """An integer in [minimum, maximum]."""
+    try:
+        v = int(value)
+        if v != float(value):
+            raise ValueError
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an integer, got {value!r}") from None
+    if v < minimum or (maximum is not None and v > maximum):
+        rng = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+        raise ValueError(f"{name} must be an integer {rng}, got {value!r}")
+    return v
+
+
+def check_range(name: str, value, lo: float, hi: float) -> float:
+    """A number in the closed interval [lo, hi]."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number in [{lo}, {hi}], got {value!r}") from None
+    if not (lo <= v <= hi):
+        raise ValueError(f"{name} must be a number in [{lo}, {hi}], got {value!r}")
+    return v

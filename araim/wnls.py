@@ -1,0 +1,131 @@
+"""Iterated weighted nonlinear least squares (WNLS), seed 001 section 2.4.
+
+    z_l = |r - r_l| + c dt_{k(l)} + v_l,   v_l ~ N(0, sigma_l^2)
+
+with one clock bias per clock group k (one receiver clock for seed 001; one per constellation
+when SOP clocks are estimated, seed 004). Gauss-Newton with a fixed iteration count (jit and vmap
+friendly): x <- x + (H^T W H)^-1 H^T W (z - h(x)), H = [(r - r_l)^T / |r - r_l|, e_k(l)^T],
+W = R^-1. A clock group with no valid source keeps its clock at the initial value (its column is
+dropped by a unit diagonal), as DESIGN.md asks for absent constellations.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from araim.status import Status
+
+
+class WNLSResult(NamedTuple):
+    position_m: jax.Array  # (..., 3) receiver position, the frame of the transmitter positions
+    clock_m: jax.Array  # (..., C) clock biases times c, metres
+    residual_m: jax.Array  # (..., L) z - h(x_hat); 0 for invalid sources
+    wsse: jax.Array  # (...) sum of weighted squared residuals: chi-square, dof = n - 3 - C
+    dof: jax.Array  # (...) n_valid - 3 - n_clocks_used
+    last_step_m: jax.Array  # (...) norm of the last Gauss-Newton step
+    covariance_m2: jax.Array  # (..., 3 + C, 3 + C) (H^T W H)^-1 at the solution
+    status: jax.Array  # (...) int8 Status
+
+
+def _design(x, tx_pos_m, clock_onehot):
+    diff = x[..., None, :3] - tx_pos_m
+    rng = jnp.linalg.norm(diff, axis=-1)
+    safe_rng = jnp.where(rng > 0, rng, 1.0)
+    u = diff / safe_rng[..., None]
+    clock = jnp.sum(clock_onehot * x[..., None, 3:], axis=-1)
+    return jnp.concatenate([u, clock_onehot], axis=-1), rng + clock
+
+
+def _normal(h, w, empty):
+    hw = h * w[..., None]
+    n = jnp.einsum("...li,...lj->...ij", hw, h)
+    k = n.shape[-1]
+    pad = jnp.concatenate([jnp.zeros(empty.shape[:-1] + (3,)), empty.astype(n.dtype)], axis=-1)
+    return n + pad[..., None, :] * jnp.eye(k), hw
+
+
+def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m):
+    w = jnp.where(valid, 1.0 / jnp.where(valid, sigma, 1.0) ** 2, 0.0)
+    onehot = (clock_index[..., None] == jnp.arange(n_clocks)) & valid[..., None]
+    empty = ~jnp.any(onehot, axis=-2)
+    onehot = onehot.astype(jnp.float64)
+
+    def body(_, carry):
+        x, step_norm, singular = carry
+        h, pred = _design(x, tx, onehot)
+        n, hw = _normal(h, w, empty)
+        rhs = jnp.einsum("...li,...l->...i", hw, pr - pred)
+        chol = jnp.linalg.cholesky(n)
+        ok = jnp.all(jnp.isfinite(chol), axis=(-2, -1))
+        safe = jnp.where(ok[..., None, None], chol, jnp.eye(n.shape[-1]))
+        dx = jax.scipy.linalg.cho_solve((safe, True), rhs[..., None])[..., 0]
+        dx = jnp.where(ok[..., None], dx, 0.0)
+        return x + dx, jnp.linalg.norm(dx, axis=-1), singular | ~ok
+
+    init = (x0, jnp.full(x0.shape[:-1], jnp.inf), jnp.zeros(x0.shape[:-1], bool))
+    x, step_norm, singular = jax.lax.fori_loop(0, n_iter, body, init)
+
+    h, pred = _design(x, tx, onehot)
+    n, _ = _normal(h, w, empty)
+    chol = jnp.linalg.cholesky(n)
+    ok = jnp.all(jnp.isfinite(chol), axis=(-2, -1)) & ~singular
+    safe = jnp.where(ok[..., None, None], chol, jnp.eye(n.shape[-1]))
+    cov = jax.scipy.linalg.cho_solve((safe, True), jnp.broadcast_to(jnp.eye(n.shape[-1]), n.shape))
+    cov = jnp.where(ok[..., None, None], cov, jnp.inf)
+    resid = jnp.where(valid, pr - pred, 0.0)
+    wsse = jnp.sum(w * resid**2, axis=-1)
+    n_states = 3 + jnp.sum(~empty, axis=-1)
+    n_valid = jnp.sum(valid, axis=-1)
+    status = jnp.where(
+        n_valid < n_states,
+        Status.TOO_FEW_SOURCES,
+        jnp.where(~ok, Status.SINGULAR_GEOMETRY,
+                  jnp.where(step_norm > tol_m, Status.NOT_CONVERGED, Status.OK)),
+    ).astype(jnp.int8)
+    return WNLSResult(x[..., :3], x[..., 3:], resid, wsse, n_valid - n_states, step_norm, cov,
+                      status)
+
+
+_wnls_jit = jax.jit(_wnls_kernel, static_argnames=("n_clocks", "n_iter"))
+
+
+def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=None,
+         n_clocks=1, n_iter=10, tol_m=1e-4) -> WNLSResult:
+    """Batched iterated WNLS position and clock solution (seed 001 section 2.4).
+
+    Args:
+      pseudorange_m: ``(..., L)`` measured pseudoranges, metres.
+      tx_pos_m: ``(..., L, 3)`` transmitter positions in any Cartesian frame (ECEF or local ENU);
+        the solution is in the same frame.
+      sigma_m: pseudorange standard deviations, broadcastable to ``(..., L)``; W = diag(1/sigma^2).
+      x0_m: ``(..., 3)`` or ``(..., 3 + n_clocks)`` initial state; default the frame origin and
+        zero clocks (the Earth's centre converges for GNSS in ECEF in ~6 iterations).
+      valid: ``(..., L)`` mask of sources used.
+      clock_index: ``(..., L)`` int clock group of each source in 0..n_clocks-1; default all 0.
+      n_clocks: number of clock groups (static).
+      n_iter: fixed number of Gauss-Newton iterations (static).
+      tol_m: the last step must be below this for status OK (else NOT_CONVERGED).
+
+    Returns:
+      ``WNLSResult``. A singular step is skipped (the state stays finite) and flagged
+      SINGULAR_GEOMETRY; the covariance is then inf.
+    """
+    pr = jnp.asarray(pseudorange_m, jnp.float64)
+    tx = jnp.asarray(tx_pos_m, jnp.float64)
+    shape = pr.shape
+    sigma = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64), shape)
+    valid = jnp.ones(shape, bool) if valid is None else jnp.broadcast_to(jnp.asarray(valid), shape)
+    if clock_index is None:
+        clock_index = jnp.zeros(shape, jnp.int32)
+    clock_index = jnp.broadcast_to(jnp.asarray(clock_index, jnp.int32), shape)
+    batch = shape[:-1]
+    if x0_m is None:
+        x0 = jnp.zeros(batch + (3 + n_clocks,))
+    else:
+        x0 = jnp.asarray(x0_m, jnp.float64)
+        if x0.shape[-1] == 3:
+            x0 = jnp.concatenate([x0, jnp.zeros(x0.shape[:-1] + (n_clocks,))], axis=-1)
+        x0 = jnp.broadcast_to(x0, batch + (3 + n_clocks,))
+    return _wnls_jit(pr, tx, sigma, x0, valid, clock_index, n_clocks=int(n_clocks),
+                     n_iter=int(n_iter), tol_m=tol_m)
