@@ -1,0 +1,163 @@
+"""The ``oaraim`` command line: list, run, report, bench, reproduce.
+
+User errors (a bad ``--set`` value, an unknown study or key) print one line naming what was
+wrong and exit with status 2, without a traceback.
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Monte Carlo RAIM / ARAIM / opportunistic ARAIM studies.")
+err = Console(stderr=True)
+out = Console()
+
+RESULTS_DIR = Path(__file__).resolve().parent.parent / "results"
+
+
+def _fail(msg: str):
+    err.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
+    raise typer.Exit(2)
+
+
+@app.command("list")
+def list_studies():
+    """List the studies with their parameters and defaults."""
+    from studies.registry import STUDIES
+
+    for name, s in STUDIES.items():
+        out.print(f"[bold]{name}[/]  {s.title}", highlight=False)
+        out.print(f"  one realization: {s.realization}; default {s.default_realizations:,}, "
+                  f"quick {s.quick_realizations:,}", highlight=False)
+        for key, p in s.params.items():
+            unit = f" {p.unit}" if p.unit else ""
+            out.print(f"    --set {key}={p.default}{unit}  {p.doc}", highlight=False)
+
+
+@app.command()
+def run(
+    study: Annotated[str, typer.Argument(help="study name (see `oaraim list`)")],
+    realizations: Annotated[int | None, typer.Option(help="Monte Carlo samples per cell")] = None,
+    seed: Annotated[int, typer.Option(help="study seed")] = 0,
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
+    set_: Annotated[list[str] | None, typer.Option("--set", help="KEY=VALUE parameter")] = None,
+    quick: Annotated[bool, typer.Option(help="use the study's quick size")] = False,
+    progress: Annotated[bool, typer.Option(help="show a progress bar on stderr")] = True,
+):
+    """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
+    from studies.execute import run_study
+
+    try:
+        summary, sdir, figures, wall = run_study(study, realizations=realizations, seed=seed,
+                                                 out=out_dir, sets=set_, quick=quick,
+                                                 show_progress=progress)
+    except ValueError as e:
+        _fail(str(e))
+    _print_rows(summary)
+    err.print(f"done in {wall:.1f} s; results in {sdir}", highlight=False)
+
+
+def _print_rows(summary):
+    t = Table(title=summary["study"], show_lines=False)
+    for col in ("quantity", "unit", "published", "reproduced"):
+        t.add_column(col)
+    for r in summary["rows"]:
+        pub = "-" if r["published"] is None else f"{r['published']:.4g}"
+        t.add_row(r["quantity"], r["unit"], pub, f"{r['reproduced']:.4g}")
+    out.print(t)
+
+
+@app.command()
+def report(
+    out_dir: Annotated[Path, typer.Option("--out", help="folder holding the study runs")] =
+    Path("out"),
+    write: Annotated[Path | None, typer.Option(help="also write the Markdown here")] = None,
+):
+    """Markdown table of every study's published vs reproduced numbers."""
+    from studies.report import build_report
+
+    text = build_report(out_dir)
+    if text is None:
+        _fail(f"no study results under {out_dir}; run `oaraim run STUDY --out {out_dir}` first")
+    print(text)
+    if write is not None:
+        write.parent.mkdir(parents=True, exist_ok=True)
+        write.write_text(text + "\n")
+
+
+@app.command()
+def reproduce(
+    quick: Annotated[bool, typer.Option(help="quick size: minutes, results/ left untouched")] =
+    False,
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
+    seed: Annotated[int, typer.Option(help="study seed")] = 0,
+    progress: Annotated[bool, typer.Option(help="show progress bars")] = True,
+):
+    """Run every study and print the reproduction report.
+
+    Full size also copies figures and summaries into results/ and writes results/REPORT.md.
+    """
+    from studies.execute import run_study
+    from studies.registry import STUDIES
+    from studies.report import build_report
+
+    for name in STUDIES:
+        summary, sdir, figures, wall = run_study(name, seed=seed, out=out_dir, quick=quick,
+                                                 show_progress=progress)
+        err.print(f"{name}: {wall:.1f} s -> {sdir}", highlight=False)
+        if not quick:
+            dest = RESULTS_DIR / name
+            dest.mkdir(parents=True, exist_ok=True)
+            for f in [*figures, sdir / "summary.json", sdir / "provenance.json"]:
+                shutil.copy2(f, dest / Path(f).name)
+    if not quick:
+        text = build_report(RESULTS_DIR, figure_dir=RESULTS_DIR)
+        (RESULTS_DIR / "REPORT.md").write_text(text + "\n")
+        err.print(f"wrote {RESULTS_DIR / 'REPORT.md'}", highlight=False)
+    else:
+        text = build_report(out_dir)
+    print(text)
+
+
+@app.command()
+def bench(
+    quick: Annotated[bool, typer.Option(help="smaller sizes (seconds instead of a minute)")] =
+    False,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the numbers here")] =
+    None,
+):
+    """Throughput of the kernels and the NumPy reference in the same run."""
+    from studies import bench as b
+
+    res = {"slope_hpl": b.bench_slope_hpl(batch=65_536 if quick else 262_144,
+                                          ref_geometries=500 if quick else 2_000)}
+    s = res["slope_hpl"]
+    out.print(f"slope HPL (M + N = 9): {s['jax_hpl_per_s']:,.0f} HPL/s "
+              f"(batch {s['batch']:,}, best of 5)", highlight=False)
+    if "speedup" in s:
+        out.print(f"  NumPy reference: {s['reference_hpl_per_s']:,.0f} HPL/s -> "
+                  f"{s['speedup']:,.0f}x; max relative difference {s['max_rel_diff']:.1e}",
+                  highlight=False)
+    else:
+        out.print("  NumPy reference: tests/reference.py not found (not a source checkout)")
+    n3 = 100_000 if quick else 1_000_000
+    res["fig3"] = b.bench_fig3(n3)
+    out.print(f"seed001-fig3-elevation at {n3:,} realizations: {res['fig3']['wall_s']:.1f} s "
+              f"wall (compile included)", highlight=False)
+    if json_out is not None:
+        json_out.write_text(json.dumps(res, indent=2) + "\n")
+
+
+def main():
+    try:
+        app()
+    except KeyboardInterrupt:
+        err.print("interrupted")
+        sys.exit(130)

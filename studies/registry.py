@@ -1,0 +1,13 @@
+"""All studies by name."""
+
+from studies.seed001_fig3 import Fig3Elevation
+from studies.seed001_fig4 import Fig4HplCdf
+
+STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf())}
+
+
+def get_study(name):
+    try:
+        return STUDIES[name]
+    except KeyError:
+        raise ValueError(f"unknown study {name!r}; known studies: {', '.join(STUDIES)}") from None
