@@ -21,17 +21,18 @@ from mc import Histogram, run_chunked
 from studies.base import Param, Study, StudyResult, count, in_range, positive
 
 
+def draw(key, n_gps, mask_rad):
+    """One realization's random draws: GPS (az, el) and the added transmitter's azimuth."""
+    k_sky, k_az = jax.random.split(key)
+    az, el = geometry.random_sky(k_sky, n_gps, mask_rad)
+    return az, el, jax.random.uniform(k_az, (), jnp.float64, 0.0, 2.0 * jnp.pi)
+
+
 @functools.partial(jax.jit, static_argnames=("n_gps",))
 def fig3_kernel(keys, n_gps, mask_rad, el_grid_rad, sigma_gps_m, sigma_added_m):
     """Per realization: index into the elevation grid of the HPL-minimising elevation (-1 if the
     base geometry is singular) and the minimum slope_max."""
-
-    def draw(key):
-        k_sky, k_az = jax.random.split(key)
-        az, el = geometry.random_sky(k_sky, n_gps, mask_rad)
-        return az, el, jax.random.uniform(k_az, (), jnp.float64, 0.0, 2.0 * jnp.pi)
-
-    az, el, az_added = jax.vmap(draw)(keys)
+    az, el, az_added = jax.vmap(lambda k: draw(k, n_gps, mask_rad))(keys)
     g = geometry.geometry_rows(az, el)
     sigma = jnp.full(az.shape, sigma_gps_m)
     slope_max, ok = added_source_slope_max(g, sigma, az_added, el_grid_rad, sigma_added_m,

@@ -36,19 +36,21 @@ SENS_SIGMA_M = (0.5, 1.0, 1.25, 1.5, 2.0)
 SENS_PROBS = ((1e-5, 1e-3), (6.67e-5, 1e-3), (1e-7, 1e-3), (1e-5, 1e-2), (1e-3, 1e-3))
 
 
+def draw(key, n_gps, n_added, mask_rad, d_min_m, d_max_m, h_min_m, h_max_m):
+    """One realization: GPS sky, added GNSS sky, BPP towers; returns (az, el) of each."""
+    k_gps, k_gnss, k_sop = jax.random.split(key, 3)
+    az, el = geometry.random_sky(k_gps, n_gps, mask_rad)
+    az_g, el_g = geometry.random_sky(k_gnss, n_added, mask_rad)
+    towers = geometry.bpp_towers(k_sop, n_added, d_min_m, d_max_m, h_min_m, h_max_m)
+    return az, el, az_g, el_g, towers.az_rad, towers.el_rad
+
+
 @functools.partial(jax.jit, static_argnames=("n_gps", "n_added"))
 def fig4_kernel(keys, n_gps, n_added, mask_rad, sigma_gps_m, sigma_sop_m, d_min_m, d_max_m,
                 h_min_m, h_max_m):
     """Per realization: slope_max (metres per sqrt(lambda)) and status of both configurations."""
-
-    def draw(key):
-        k_gps, k_gnss, k_sop = jax.random.split(key, 3)
-        az, el = geometry.random_sky(k_gps, n_gps, mask_rad)
-        az_g, el_g = geometry.random_sky(k_gnss, n_added, mask_rad)
-        towers = geometry.bpp_towers(k_sop, n_added, d_min_m, d_max_m, h_min_m, h_max_m)
-        return az, el, az_g, el_g, towers.az_rad, towers.el_rad
-
-    az, el, az_g, el_g, az_s, el_s = jax.vmap(draw)(keys)
+    az, el, az_g, el_g, az_s, el_s = jax.vmap(
+        lambda k: draw(k, n_gps, n_added, mask_rad, d_min_m, d_max_m, h_min_m, h_max_m))(keys)
     g_gnss = geometry.geometry_rows(jnp.concatenate([az, az_g], -1),
                                     jnp.concatenate([el, el_g], -1))
     g_sop = geometry.geometry_rows(jnp.concatenate([az, az_s], -1),

@@ -1,0 +1,126 @@
+"""Studies of seed 001: kernels against the NumPy oracle, published numbers, storage."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+import mc
+from studies import seed001_fig3, seed001_fig4
+from studies.execute import run_study
+from studies.registry import STUDIES
+from studies.report import build_report
+from tests.reference import slopes_reference
+
+
+def test_fig3_kernel_matches_numpy_oracle_argmin():
+    """el* from the rank-one sweep equals el* from the literal seed formula per elevation."""
+    grid_deg = np.arange(0, 90.001, 0.5)
+    keys = mc.realization_keys(11, 0, 0, 40)
+    out = seed001_fig3.fig3_kernel(keys, n_gps=5, mask_rad=np.deg2rad(15.0),
+                                   el_grid_rad=np.deg2rad(grid_deg), sigma_gps_m=1.0,
+                                   sigma_added_m=1.0)
+    for i, key in enumerate(keys):
+        az, el, az_add = (np.asarray(a) for a in seed001_fig3.draw(key, 5, np.deg2rad(15.0)))
+        smax = []
+        for e in np.deg2rad(grid_deg):
+            a6, e6 = np.append(az, az_add), np.append(el, e)
+            g = np.stack([-np.cos(e6) * np.sin(a6), -np.cos(e6) * np.cos(a6), -np.sin(e6)], -1)
+            smax.append(slopes_reference(g, 1.0).max())
+        smax = np.array(smax)
+        k = int(out["el_star_index"][i])
+        # same index, or (a near tie) the oracle's value there is within 1e-9 of its minimum
+        assert k == int(np.argmin(smax)) or smax[k] <= smax.min() * (1 + 1e-9)
+        assert out["slope_max_min"][i] == pytest.approx(smax.min(), rel=1e-8)
+
+
+def test_fig3_published_shape_mode_at_zero_elevation():
+    """Seed 001 Fig. 3 and section 3.3: 'measurements from terrestrial transmitters (at zero
+    elevation angle) are more likely to minimize the HPL than GNSS satellites'.
+
+    At 20,000 realizations the 0 deg share (~17.5 %) has a binomial sd of 0.27 %; every other
+    0.5 deg bin holds under 6 %, so the mode test cannot flip by chance.
+    """
+    study = STUDIES["seed001-fig3-elevation"]
+    res = study.run(study.validate({}), 20_000, 0, None)
+    share = res.dataset["share"].values
+    assert np.argmax(share) == 0
+    assert share[0] > 0.10
+    assert res.rows[0]["reproduced"] == 0.0
+
+
+def test_fig4_kernel_matches_numpy_oracle():
+    keys = mc.realization_keys(5, 0, 0, 64)
+    args = dict(n_gps=5, n_added=4, mask_rad=np.deg2rad(15.0), d_min_m=5.0, d_max_m=3000.0,
+                h_min_m=0.0, h_max_m=0.0)
+    out = seed001_fig4.fig4_kernel(keys, sigma_gps_m=1.0, sigma_sop_m=2.0, **args)
+    for i, key in enumerate(keys):
+        az, el, az_g, el_g, az_s, el_s = (np.asarray(a) for a in seed001_fig4.draw(key, **args))
+        assert np.all(el_s == 0.0)
+        for name, a2, e2, sig in (("gnss", az_g, el_g, [1.0] * 9),
+                                  ("sop", az_s, el_s, [1.0] * 5 + [2.0] * 4)):
+            a9, e9 = np.append(az, a2), np.append(el, e2)
+            g = np.stack([-np.cos(e9) * np.sin(a9), -np.cos(e9) * np.cos(a9), -np.sin(e9)], -1)
+            want = slopes_reference(g, np.array(sig)).max()
+            assert out[f"slope_max_{name}"][i] == pytest.approx(want, rel=1e-10)
+
+
+@pytest.fixture(scope="module")
+def fig4_50k():
+    study = STUDIES["seed001-fig4-hpl-cdf"]
+    return study.run(study.validate({}), 50_000, 0, None)
+
+
+def test_fig4_matching_hal_reproduces_published_46_m(fig4_50k):
+    """Seed 001 Fig. 4: 'the HAL for GNSS only must be set to 46 m'. The matching HAL is a
+    ratio of quantiles and barely moves with sigma, P_FA, P_MD (sensitivity table). At 50,000
+    realizations its sampling sd is ~0.4 m (spread of 4 independent seeds); we allow 2 m."""
+    assert fig4_50k.rows[2]["published"] == 46.0
+    assert abs(fig4_50k.rows[2]["reproduced"] - 46.0) < 2.0
+    for row in fig4_50k.metrics["sensitivity"]:
+        if row["sigma_m"] >= 1.0:
+            assert abs(row["matching_hal_m"] - 46.0) < 2.0
+
+
+def test_fig4_published_availabilities_reached_at_one_common_scale(fig4_50k):
+    """Seed 001 Fig. 4: 81.4 % (GNSS) and 94.7 % (SOP) at HAL = 30 m. Both published numbers
+    are met by one and the same sigma sqrt(lambda_det) (= 10.44 m: sigma = 1.25 m with
+    P_FA = 1e-5, P_MD = 1e-3), which checks the two geometry models against each other.
+    Binomial sd at 50,000 is <= 0.18 %; tolerance 1 percentage point."""
+    row = next(r for r in fig4_50k.metrics["sensitivity"]
+               if r["sigma_m"] == 1.25 and r["p_fa"] == 1e-5 and r["p_md"] == 1e-3)
+    assert abs(row["availability_gnss_pct"] - 81.4) < 1.0
+    assert abs(row["availability_sop_pct"] - 94.7) < 1.0
+
+
+def test_fig4_sop_curve_dominates(fig4_50k):
+    ds = fig4_50k.dataset
+    assert np.all(ds["cdf_sop"].values >= ds["cdf_gnss"].values - 0.005)
+    assert fig4_50k.metrics["mean_hpl_reduction_m"] > 0
+
+
+@pytest.mark.parametrize("name", list(STUDIES))
+def test_study_results_bit_identical_for_any_chunk_size(name):
+    study = STUDIES[name]
+    a = study.run(study.validate({"chunk": 1024}), 3000, 4, None)
+    b = study.run(study.validate({"chunk": 4096}), 3000, 4, None)
+    xr.testing.assert_identical(a.dataset, b.dataset)
+    assert json.dumps(a.metrics, default=str) == json.dumps(b.metrics, default=str)
+
+
+@pytest.mark.parametrize("name", list(STUDIES))
+def test_run_writes_data_summary_provenance_and_figures(tmp_path, name):
+    summary, sdir, figures, _ = run_study(name, realizations=2048, out=tmp_path,
+                                          show_progress=False)
+    assert (sdir / "data.zarr").is_dir()
+    s = json.loads((sdir / "summary.json").read_text())
+    assert s["study"] == name and set(s) >= {"rows", "metrics"}
+    for row in s["rows"]:
+        assert set(row) >= {"quantity", "unit", "published", "reproduced", "note"}
+    p = json.loads((sdir / "provenance.json").read_text())
+    assert p["realizations"] == 2048 and p["seed"] == 0 and p["parameters"]
+    assert figures and all((sdir / f.split("/")[-1]).is_file() for f in figures)
+    text = build_report(tmp_path)
+    assert name in text and "| quantity | unit | published | reproduced | note |" in text
