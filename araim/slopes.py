@@ -61,7 +61,8 @@ def _check_sigma(sigma_m):
         return
     if not np.all(np.isfinite(s) & (s > 0)):
         bad = s[~(np.isfinite(s) & (s > 0))].ravel()[0]
-        raise ValueError(f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
+        raise ValueError(
+            f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
 
 
 def _slopes_kernel(g, sigma_m, valid):

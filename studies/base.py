@@ -1,7 +1,8 @@
 """What every study declares: parameters with validation, a run, and a plot that reads results."""
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -26,8 +26,16 @@ import geometry
 from araim.chi2 import lambda_det_table
 from araim.slopes import _slopes_kernel
 from mc import EmpiricalCDF, Mean, run_chunked
-from studies.base import Param, Study, StudyResult, count, in_range, non_negative, positive, \
-    probability
+from studies.base import (
+    Param,
+    Study,
+    StudyResult,
+    count,
+    in_range,
+    non_negative,
+    positive,
+    probability,
+)
 
 HPL_GRID_M = np.round(np.arange(0.0, 500.0 + 1e-9, 0.01), 2)
 
