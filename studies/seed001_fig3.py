@@ -50,7 +50,7 @@ class Fig3Elevation(Study):
     seed_file = "001_c7da69deb44e932b.txt"
     realization = "one random 5-satellite sky and one added transmitter azimuth"
     default_realizations = 1_000_000
-    quick_realizations = 50_000
+    quick_realizations = 200_000
     params = {
         "n_gps": Param(5, count(4, 30), "GPS satellites M (seed 001 Fig. 3: 5)"),
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "elevation mask (seed 001: 15 deg)", "deg"),

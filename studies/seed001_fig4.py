@@ -92,7 +92,7 @@ class Fig4HplCdf(Study):
     seed_file = "001_c7da69deb44e932b.txt"
     realization = "one random 5-satellite sky with 4 added satellites and 4 BPP towers"
     default_realizations = 1_000_000
-    quick_realizations = 50_000
+    quick_realizations = 200_000
     params = {
         "n_gps": Param(5, count(4, 30), "pre-deployed GPS satellites M (seed 001 Fig. 4: 5)"),
         "n_added": Param(4, count(1, 30), "added GNSS satellites or SOPs N (seed 001: 4)"),
