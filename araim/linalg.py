@@ -9,8 +9,11 @@ matrix size, unrolled at trace time.
 
 import jax.numpy as jnp
 
-#: a pivot smaller than this fraction of its diagonal entry marks the matrix singular: the
-#: column is, to ~1e-10, a combination of the previous ones (condition number beyond ~1e10).
+#: a pivot smaller than this fraction of the largest diagonal entry marks the matrix singular
+#: (condition number beyond ~1e10). The design columns here are all dimensionless (unit-vector
+#: components and clock indicators), so the largest diagonal entry is the natural scale; a
+#: tolerance relative to each column's own diagonal would accept a column that is pure rounding
+#: noise (e.g. east = -cos(el) sin(pi) ~ 1e-16 for azimuths all 0 or 180 deg).
 RELATIVE_PIVOT_TOLERANCE = 1e-10
 
 
@@ -38,17 +41,21 @@ def cholesky(n):
 
     Returns:
       (lower, ok): ``lower[i][j]`` for j <= i, and a boolean array, False where a pivot fell
-      below ``RELATIVE_PIVOT_TOLERANCE`` times its diagonal entry (singular or indefinite). Where
-      not ok, the factor holds finite placeholder values: callers mask the results.
+      below ``RELATIVE_PIVOT_TOLERANCE`` times the largest diagonal entry (singular or
+      indefinite). Where not ok, the factor holds finite placeholder values: callers mask the
+      results.
     """
     k = len(n)
     lower = [[None] * k for _ in range(k)]
     ok = None
+    scale = n[0][0]
+    for j in range(1, k):
+        scale = jnp.maximum(scale, n[j][j])
     for j in range(k):
         pivot = n[j][j]
         for m in range(j):
             pivot = pivot - lower[j][m] ** 2
-        good = pivot > RELATIVE_PIVOT_TOLERANCE * n[j][j]
+        good = pivot > RELATIVE_PIVOT_TOLERANCE * scale
         ok = good if ok is None else ok & good
         d = jnp.sqrt(jnp.where(good, pivot, 1.0))
         lower[j][j] = d

@@ -54,18 +54,23 @@ def _prepare(g, sigma_m, valid):
     return g, sigma_m, valid
 
 
-def _check_sigma(sigma_m):
+def check_sigma(sigma_m, valid):
+    """Reject non-positive or non-finite standard deviations of *valid* sources (padding rows
+    may hold anything). Silently skipped for traced values inside jit."""
     try:
-        s = np.asarray(sigma_m)
-    except Exception:  # a tracer: checked by the caller outside jit
+        s, v = np.asarray(sigma_m), np.asarray(valid)
+    except Exception:  # a tracer: the caller validates outside jit
         return
-    if not np.all(np.isfinite(s) & (s > 0)):
-        bad = s[~(np.isfinite(s) & (s > 0))].ravel()[0]
+    bad_mask = v & ~(np.isfinite(s) & (s > 0))
+    if np.any(bad_mask):
+        bad = s[bad_mask].ravel()[0]
         raise ValueError(
             f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
 
 
 def _slopes_kernel(g, sigma_m, valid):
+    # padding rows may hold anything (NaN, inf): zero them so 0 * NaN never reaches a sum
+    g = jnp.where(valid[..., None], g, 0.0)
     w = jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
     one = jnp.ones_like(gx)
@@ -120,7 +125,7 @@ def slopes(g, sigma_m, valid=None) -> Slopes:
       the status is not OK the maximum is ``inf``.
     """
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
-    _check_sigma(sigma_m)
+    check_sigma(sigma_m, valid)
     return _slopes_jit(g, sigma_m, valid)
 
 
@@ -145,7 +150,7 @@ def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
     p_fa = check_probability("p_fa", p_fa)
     p_md = check_probability("p_md", p_md)
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
-    _check_sigma(sigma_m)
+    check_sigma(sigma_m, valid)
     n_sources = g.shape[-2]
     table = lambda_det_table(p_fa, p_md, max(n_sources - N_STATES, 1))
     return _slope_hpl_jit(g, sigma_m, valid, jnp.asarray(table))

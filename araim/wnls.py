@@ -14,6 +14,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from araim.slopes import check_sigma
 from araim.status import Status
 
 
@@ -46,6 +47,9 @@ def _normal(h, w, empty):
 
 
 def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m):
+    # padding rows may hold anything (NaN, inf): replace them before any arithmetic
+    pr = jnp.where(valid, pr, 0.0)
+    tx = jnp.where(valid[..., None], tx, 0.0)
     w = jnp.where(valid, 1.0 / jnp.where(valid, sigma, 1.0) ** 2, 0.0)
     onehot = (clock_index[..., None] == jnp.arange(n_clocks)) & valid[..., None]
     empty = ~jnp.any(onehot, axis=-2)
@@ -119,6 +123,7 @@ def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=No
     if clock_index is None:
         clock_index = jnp.zeros(shape, jnp.int32)
     clock_index = jnp.broadcast_to(jnp.asarray(clock_index, jnp.int32), shape)
+    check_sigma(sigma, valid)
     batch = shape[:-1]
     if x0_m is None:
         x0 = jnp.zeros(batch + (3 + n_clocks,))
