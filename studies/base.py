@@ -4,8 +4,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from araim.validate import check_int, check_positive, check_probability, check_range
 
 
@@ -80,11 +78,3 @@ class Study:
     def plot(self, out_dir) -> list:
         raise NotImplementedError
 
-
-def share_pct(x):
-    return float(100.0 * x)
-
-
-def as_float(x):
-    x = float(np.asarray(x))
-    return x
