@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from araim import linalg
-from araim.slopes import REDUNDANCY_TOLERANCE
+from araim.slopes import REDUNDANCY_TOLERANCE, masked_geometry
 
 
 @jax.jit
@@ -36,7 +36,7 @@ def added_source_slope_max(g, sigma_m, az_added_rad, el_grid_rad, sigma_added_m,
       redundancy; base_ok is False where the base geometry itself is singular (then every
       slope_max of that row is ``inf``).
     """
-    w = jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)  # (B, M)
+    g, w = masked_geometry(g, sigma_m, valid)  # w: (B, M)
     w_add = (1.0 / jnp.asarray(sigma_added_m, jnp.float64) ** 2) * jnp.ones_like(az_added_rad)
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
     one = jnp.ones_like(gx)

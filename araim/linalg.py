@@ -17,6 +17,11 @@ import jax.numpy as jnp
 RELATIVE_PIVOT_TOLERANCE = 1e-10
 
 
+def inverse_variance_weights(sigma_m, valid):
+    """w = 1 / sigma^2 for valid sources and 0 for padding (whatever its sigma holds)."""
+    return jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)
+
+
 def normal_entries(cols, w):
     """Entries N[j][k] = sum_l w_l c_j,l c_k,l of the weighted normal matrix.
 

@@ -15,12 +15,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from araim import linalg
 from araim.chi2 import lambda_det_table
 from araim.status import Status
-from araim.validate import check_probability
+from araim.validate import check_probability, check_sigma
 
 N_STATES = 4  # east, north, up, receiver clock
 
@@ -54,24 +53,14 @@ def _prepare(g, sigma_m, valid):
     return g, sigma_m, valid
 
 
-def check_sigma(sigma_m, valid):
-    """Reject non-positive or non-finite standard deviations of *valid* sources (padding rows
-    may hold anything). Silently skipped for traced values inside jit."""
-    try:
-        s, v = np.asarray(sigma_m), np.asarray(valid)
-    except Exception:  # a tracer: the caller validates outside jit
-        return
-    bad_mask = v & ~(np.isfinite(s) & (s > 0))
-    if np.any(bad_mask):
-        bad = s[bad_mask].ravel()[0]
-        raise ValueError(
-            f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
+def masked_geometry(g, sigma_m, valid):
+    """Rows with padding zeroed (padding may hold NaN or inf: 0 * NaN must never reach a sum)
+    and the inverse-variance weights, 0 for padding."""
+    return jnp.where(valid[..., None], g, 0.0), linalg.inverse_variance_weights(sigma_m, valid)
 
 
 def _slopes_kernel(g, sigma_m, valid):
-    # padding rows may hold anything (NaN, inf): zero them so 0 * NaN never reaches a sum
-    g = jnp.where(valid[..., None], g, 0.0)
-    w = jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)
+    g, w = masked_geometry(g, sigma_m, valid)
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
     one = jnp.ones_like(gx)
     lower, nonsingular = linalg.cholesky(linalg.normal_entries([gx, gy, gz, one], w))

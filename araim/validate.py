@@ -6,6 +6,8 @@ so the CLI can print it as one line and exit with status 2.
 
 import math
 
+import numpy as np
+
 
 def check_probability(name: str, value) -> float:
     """A probability strictly inside (0, 1)."""
@@ -54,3 +56,17 @@ def check_range(name: str, value, lo: float, hi: float) -> float:
     if not (lo <= v <= hi):
         raise ValueError(f"{name} must be a number in [{lo}, {hi}], got {value!r}")
     return v
+
+
+def check_sigma(sigma_m, valid):
+    """Reject non-positive or non-finite standard deviations of *valid* sources (padding rows
+    may hold anything). Silently skipped for traced values inside jit."""
+    try:
+        s, v = np.asarray(sigma_m), np.asarray(valid)
+    except Exception:  # a tracer: the caller validates outside jit
+        return
+    bad_mask = v & ~(np.isfinite(s) & (s > 0))
+    if np.any(bad_mask):
+        bad = s[bad_mask].ravel()[0]
+        raise ValueError(
+            f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")

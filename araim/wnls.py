@@ -14,8 +14,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from araim.slopes import check_sigma
+from araim.linalg import inverse_variance_weights
 from araim.status import Status
+from araim.validate import check_sigma
 
 
 class WNLSResult(NamedTuple):
@@ -50,7 +51,7 @@ def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m)
     # padding rows may hold anything (NaN, inf): replace them before any arithmetic
     pr = jnp.where(valid, pr, 0.0)
     tx = jnp.where(valid[..., None], tx, 0.0)
-    w = jnp.where(valid, 1.0 / jnp.where(valid, sigma, 1.0) ** 2, 0.0)
+    w = inverse_variance_weights(sigma, valid)
     onehot = (clock_index[..., None] == jnp.arange(n_clocks)) & valid[..., None]
     empty = ~jnp.any(onehot, axis=-2)
     onehot = onehot.astype(jnp.float64)

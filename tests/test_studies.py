@@ -2,6 +2,7 @@
 
 import json
 
+import jax
 import numpy as np
 import pytest
 import xarray as xr
@@ -123,3 +124,27 @@ def test_run_writes_data_summary_provenance_and_figures(tmp_path, name):
     assert figures and all((sdir / f.split("/")[-1]).is_file() for f in figures)
     text = build_report(tmp_path)
     assert name in text and "| quantity | unit | published | reproduced | note |" in text
+
+
+def test_added_source_sweep_ignores_nan_padding():
+    """The rank-one sweep masks padding rows like araim.slopes does: NaN/inf junk in invalid
+    rows leaves every slope_max unchanged (bit for bit)."""
+    import jax.numpy as jnp
+
+    from araim.added_source import added_source_slope_max
+
+    keys = mc.realization_keys(2, 0, 0, 16)
+    az, el, az_add = jax.vmap(lambda k: seed001_fig3.draw(k, 5, np.deg2rad(15.0)))(keys)
+    g = np.asarray(jnp.stack([-np.cos(el) * np.sin(az), -np.cos(el) * np.cos(az),
+                              -np.sin(el)], -1))
+    grid = jnp.asarray(np.deg2rad(np.arange(0, 90.001, 0.5)))
+    base, ok = added_source_slope_max(g, np.ones((16, 5)), az_add, grid, 1.0,
+                                      np.ones((16, 5), bool))
+    gp = np.concatenate([g, np.full((16, 2, 3), np.nan)], axis=1)
+    gp[:, 6] = np.inf
+    sp = np.concatenate([np.ones((16, 5)), np.full((16, 2), np.nan)], axis=1)
+    valid = np.arange(7) < 5
+    padded, ok_p = added_source_slope_max(gp, sp, az_add, grid, 1.0,
+                                          np.broadcast_to(valid, (16, 7)))
+    assert np.all(np.asarray(ok)) and np.all(np.asarray(ok_p))
+    np.testing.assert_array_equal(np.asarray(padded), np.asarray(base))
