@@ -18,6 +18,10 @@ class Status(enum.IntEnum):
     UNDETECTABLE_FAULT = 3
     #: the iterated least squares did not meet its step tolerance in the fixed iteration count
     NOT_CONVERGED = 4
+    #: the probability of the fault modes left unmonitored (too many simultaneous faults for
+    #: the mode order allowed, or fault-tolerant subsets that are singular) exceeds P_thresh
+    #: (seed 004 eq. 8)
+    UNMONITORED_RISK = 5
 
 
 def describe(code: int) -> str:

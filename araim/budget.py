@@ -1,0 +1,55 @@
+"""Integrity and continuity budgets of ARAIM / OARAIM (seed 004 Table I, the ADD).
+
+Probabilities are per approach / per hour exactly as the source defines them; the solver only
+needs the six numbers. Presets:
+
+- ``BUDGET_SEED004_TABLE_I``: seed 004 Table I read by its *symbols* (DESIGN.md: the table swaps
+  the words "vertical" and "horizontal"): PHMI_H = 9.9e-8, PHMI_V = 1e-9, P_FA_H = 9.9e-8,
+  P_FA_V = 1e-9, P_thresh = 6e-8. This is MAAST's horizontal-ARAIM preset, although the text says
+  LPV-200. P_EMT is not in Table I: the ADD value 1e-5 is used.
+- ``BUDGET_LPV200``: the vertical-guidance (LPV-200) allocation of the WG-C ARAIM Technical
+  Subgroup Airborne Algorithm Description Document (ADD) v2.0/v3.0, Table 1 of constants:
+  PHMI_VERT = 9.8e-8, PHMI_HOR = 2e-9, P_FA_VERT = 3.9e-6, P_FA_HOR = 9e-8, P_THRES = 8e-8,
+  P_EMT = 1e-5.
+"""
+
+from dataclasses import asdict, dataclass
+
+from araim.validate import check_probability
+
+
+@dataclass(frozen=True)
+class IntegrityBudget:
+    """Integrity (PHMI) and false-alarm (P_FA) allocations, P_thresh and P_EMT.
+
+    Attributes:
+      phmi_v, phmi_h: integrity budget of the vertical and horizontal PLs (eqs. 14, 16).
+      p_fa_v, p_fa_h: false-alarm budget of the vertical and horizontal tests (eq. 12).
+      p_thresh: bound on the probability of unmonitored fault modes (eq. 8).
+      p_emt: fault modes with prior >= p_emt enter the effective monitor threshold (ADD).
+    """
+
+    phmi_v: float
+    phmi_h: float
+    p_fa_v: float
+    p_fa_h: float
+    p_thresh: float
+    p_emt: float = 1e-5
+
+    def __post_init__(self):
+        for name, value in asdict(self).items():
+            object.__setattr__(self, name, check_probability(f"budget.{name}", value))
+        if self.p_thresh >= self.phmi_v + self.phmi_h:
+            raise ValueError(
+                f"budget.p_thresh ({self.p_thresh}) must be below phmi_v + phmi_h "
+                f"({self.phmi_v + self.phmi_h}): the unmonitored risk would exhaust the "
+                "integrity budget of eqs. (14) and (16)")
+
+
+#: seed 004 Table I by its symbols (DESIGN.md), P_EMT from the ADD
+BUDGET_SEED004_TABLE_I = IntegrityBudget(
+    phmi_v=1e-9, phmi_h=9.9e-8, p_fa_v=1e-9, p_fa_h=9.9e-8, p_thresh=6e-8, p_emt=1e-5)
+
+#: LPV-200 allocation of the ARAIM ADD (v2.0/v3.0, Table 1)
+BUDGET_LPV200 = IntegrityBudget(
+    phmi_v=9.8e-8, phmi_h=2e-9, p_fa_v=3.9e-6, p_fa_h=9e-8, p_thresh=8e-8, p_emt=1e-5)

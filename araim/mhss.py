@@ -1,0 +1,345 @@
+"""Multiple-hypothesis solution separation (MHSS) protection levels, seed 004 eqs. (8)-(16).
+
+State: [east, north, up, one clock per constellation slot]. For every geometry of a batch the
+kernel builds the all-in-view solution (mode 0) and one fault-tolerant solution per candidate
+fault mode of ``araim.fault_modes`` (static template, live modes masked), all at once on arrays
+of shape (..., K) with K = 1 + number of candidate modes, and:
+
+    W^(i)(l,l) = C_int^-1(l,l) if l is NOT hypothesised faulty, else 0  (after eq. 9, corrected)
+    S^(i) = (H^T W^(i) H)^-1 H^T W^(i)                                   (after eq. 9)
+    sigma_q^(i)^2 = (H^T W^(i) H)^-1_qq                                  (9)
+    b_q^(i) = sum_l |S^(i)_ql| b_nom,l                                   (10)
+    sigma_ss,q^(i)^2 = e_q^T (S^(i) - S^(0)) C_acc (S^(i) - S^(0))^T e_q  (11)
+    T_i,q = K_fa,q sigma_ss,q^(i), K_fa,H = Q^-1(P_FA_H / (4 N_f)),
+                                  K_fa,V = Q^-1(P_FA_V / (2 N_f))        (12)
+    PL_q: 2 Q((PL - b^(0))/sigma^(0)) + sum_i P_f^(i) Q((PL - T_i,q - b^(i))/sigma^(i)) = rhs_q
+          rhs_H = PHMI_H / 2 (1 - P_nm / (PHMI_V + PHMI_H)),  rhs_V = PHMI_V (...)  (14), (16)
+    HPL = sqrt(PL_1^2 + PL_2^2)                                          (15)
+
+All projectors are weighted with C_int^-1, S^(0) included (the ADD and MAAST; DESIGN.md);
+``all_in_view_weighting="acc"`` restores the seed's C_acc^-1 for S^(0) (sigma^(0) is then
+sqrt(S^(0) C_int S^(0)T)_qq). A clock column whose constellation has no source left in a mode
+is dropped by putting 1 on its (otherwise all-zero) diagonal: the position block is unchanged.
+
+Each PL equation is solved in log space by the Illinois variant of regula falsi from a bracket
+[lo, hi] that is valid by construction (lo: the largest PL at which one term alone reaches the
+budget; hi: every term at most budget / number of terms), a fixed number of iterations, then a
+check that the root lies within ``PL_TOLERANCE_M`` below the returned (conservative, upper) end.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import erfc, ndtri
+
+from araim import linalg
+from araim.budget import IntegrityBudget
+from araim.fault_modes import fault_modes
+from araim.status import Status
+from araim.validate import check_int
+
+#: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
+PL_TOLERANCE_M = 1e-3
+#: Illinois iterations; measured: converged for every geometry of the tests and benchmarks
+PL_ITERATIONS = 14
+_SQRT1_2 = 0.7071067811865476
+
+
+def q_function(x):
+    """Q(x) = P(N(0,1) > x) = erfc(x / sqrt 2) / 2 (cheaper than ndtr; DESIGN.md)."""
+    return 0.5 * erfc(x * _SQRT1_2)
+
+
+def q_inverse(p):
+    """Q^-1(p) = -Phi^-1(p)."""
+    return -ndtri(p)
+
+
+class MHSSResult(NamedTuple):
+    hpl_m: jax.Array  # (...) eq. (15); inf where status != OK
+    vpl_m: jax.Array  # (...) eq. (16)
+    emt_m: jax.Array  # (...) effective monitor threshold (vertical), ADD
+    sigma_acc_u_m: jax.Array  # (...) vertical accuracy sigma of the all-in-view solution
+    n_modes: jax.Array  # (...) N_f: monitored fault modes
+    p_not_monitored: jax.Array  # (...) P_NM of eqs. (14), (16)
+    status: jax.Array  # (...) Status
+    order: jax.Array  # (...) number of simultaneous faulty constellations monitored
+    pl_enu_m: jax.Array  # (..., 3) PL_1, PL_2, PL_3
+
+
+class Projection(NamedTuple):
+    """Everything the PL equations and the solution-separation test need, per mode."""
+
+    s_pos: jax.Array  # (..., K, 3, L) position rows of S^(i) (i = 0 all-in-view)
+    sigma: jax.Array  # (..., K, 3) sigma_q^(i)
+    bias: jax.Array  # (..., K, 3) b_q^(i)
+    sigma_ss: jax.Array  # (..., K, 3) sigma_ss,q^(i) (0 for i = 0)
+    threshold: jax.Array  # (..., K, 3) T_i,q (0 for i = 0)
+    monitored: jax.Array  # (..., K) live and nonsingular, False for i = 0
+    prior: jax.Array  # (..., K) P_f^(i), 0 for i = 0
+    excluded: jax.Array  # (..., K, L) sources hypothesised faulty
+    n_modes: jax.Array  # (...)
+    p_not_monitored: jax.Array  # (...)
+    order: jax.Array  # (...)
+    status: jax.Array  # (...) status before root finding
+    sigma_acc_u: jax.Array  # (...)
+
+
+def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
+             max_order, all_in_view_weighting):
+    C = p_const.shape[-1]
+    fm = fault_modes(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
+    g = jnp.where(valid[..., None], g, 0.0)
+    w_int = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid)
+    var_acc = jnp.where(valid, var_acc, 0.0)
+    var_int = jnp.where(valid, var_int, 0.0)
+    b_nom = jnp.where(valid, b_nom, 0.0)
+    member = valid[..., :, None] & (constellation[..., :, None] == jnp.arange(C))  # (..., L, C)
+
+    keep = jnp.concatenate([valid[..., None, :], valid[..., None, :] & ~fm.excluded], axis=-2)
+    w = jnp.where(keep, w_int[..., None, :], 0.0)  # (..., K, L)
+    if all_in_view_weighting == "acc":
+        w_acc = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
+        w = w.at[..., 0, :].set(w_acc)
+    cols = [g[..., None, :, 0], g[..., None, :, 1], g[..., None, :, 2]]
+    cols += [member[..., None, :, c].astype(g.dtype) for c in range(C)]
+    n = linalg.normal_entries(cols, w)
+    kept_c = jnp.any(keep[..., :, :, None] & member[..., None, :, :], axis=-2)  # (..., K, C)
+    for c in range(C):
+        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[..., c], 0.0, 1.0)
+    lower, nonsingular = linalg.cholesky(n)
+    zero = jnp.zeros_like(n[0][0])
+    y = [linalg.cholesky_solve(lower, [jnp.where(j == q, 1.0, 0.0) + zero
+                                       for j in range(3 + C)]) for q in range(3)]
+    # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}: (..., K, L) per q
+    s_pos = [w * sum(y[q][a][..., None] * cols[a] for a in range(3 + C)) for q in range(3)]
+    s_pos = jnp.stack(s_pos, axis=-2)  # (..., K, 3, L)
+    var_pos = jnp.stack([y[q][q] for q in range(3)], axis=-1)  # (..., K, 3)
+    if all_in_view_weighting == "acc":
+        var0 = jnp.sum(s_pos[..., 0, :, :] ** 2 * var_int[..., None, :], axis=-1)
+        var_pos = var_pos.at[..., 0, :].set(var0)
+
+    live = jnp.concatenate([jnp.zeros_like(fm.live[..., :1]), fm.live], axis=-1)
+    prior_all = jnp.concatenate([jnp.zeros_like(fm.prior[..., :1]), fm.prior], axis=-1)
+    monitored = live & nonsingular
+    aiv_ok = nonsingular[..., 0]
+    usable = monitored.at[..., 0].set(aiv_ok)
+    s_pos = jnp.where(usable[..., None, None], s_pos, 0.0)
+    sigma = jnp.sqrt(jnp.where(usable[..., None], jnp.maximum(var_pos, 0.0), 1.0))
+    bias = jnp.sum(jnp.abs(s_pos) * b_nom[..., None, None, :], axis=-1)
+    d = s_pos - s_pos[..., :1, :, :]
+    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[..., None, None, :], axis=-1))
+
+    n_modes = jnp.sum(monitored, axis=-1)
+    nf = jnp.maximum(n_modes, 1).astype(g.dtype)
+    k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
+    k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
+    k_fa = jnp.stack([k_h, k_h, k_v], axis=-1)  # (..., 3)
+    threshold = jnp.where(monitored[..., None], k_fa[..., None, :] * sigma_ss, 0.0)
+
+    prior = jnp.where(monitored, prior_all, 0.0)
+    p_nm = fm.p_beyond_order + jnp.sum(jnp.where(live & ~nonsingular, prior_all, 0.0), axis=-1)
+
+    n_valid = jnp.sum(valid, axis=-1)
+    n_present = jnp.sum(jnp.any(member, axis=-2), axis=-1)
+    status = jnp.where(
+        n_valid < 3 + n_present + 1, Status.TOO_FEW_SOURCES,
+        jnp.where(~aiv_ok, Status.SINGULAR_GEOMETRY,
+                  jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK)))
+    sigma_acc_u = jnp.sqrt(jnp.sum(s_pos[..., 0, 2, :] ** 2 * var_acc, axis=-1))
+    return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[..., 0].set(False),
+                      prior, keep[..., 1:, :] != valid[..., None, :], n_modes, p_nm,
+                      fm.order, status.astype(jnp.int8), sigma_acc_u)
+
+
+def _log_risk(x, coef, mean, sd):
+    """log of sum_j coef_j Q((x - mean_j) / sd_j) for x of shape (...), terms (..., J)."""
+    return jnp.log(jnp.sum(coef * q_function((x[..., None] - mean) / sd), axis=-1))
+
+
+def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
+    """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs, batched over leading axes.
+
+    coef >= 0 (terms with coef 0 are ignored; sd must then still be > 0), rhs > 0, and at least
+    one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged).
+    """
+    active = coef > 0
+    n_terms = jnp.sum(active, axis=-1).astype(coef.dtype)
+    safe = jnp.where(active, coef, 1.0)
+    p_lo = rhs[..., None] / safe
+    p_hi = rhs[..., None] / (n_terms[..., None] * safe)
+    lo = jnp.max(jnp.where(active & (p_lo < 1),
+                           mean + sd * q_inverse(jnp.where(p_lo < 1, p_lo, 0.5)), -jnp.inf),
+                 axis=-1)
+    hi = jnp.max(jnp.where(active & (p_hi < 1),
+                           mean + sd * q_inverse(jnp.where(p_hi < 1, p_hi, 0.5)), -jnp.inf),
+                 axis=-1)
+    log_rhs = jnp.log(rhs)
+
+    def h(x):
+        return _log_risk(x, coef, mean, sd) - log_rhs
+
+    fa, fb = h(lo), h(hi)
+    fa = jnp.maximum(fa, 0.0)  # h(lo) >= 0 and h(hi) <= 0 by construction; clip rounding
+    fb = jnp.minimum(fb, 0.0)
+
+    def step(_, carry):
+        a, b, fa, fb, side = carry
+        denom = fa - fb
+        x = jnp.where(denom > 0, b + fb * (b - a) / jnp.where(denom > 0, denom, 1.0),
+                      0.5 * (a + b))
+        x = jnp.clip(x, a, b)
+        fx = h(x)
+        right = fx <= 0  # x becomes the new upper end b
+        a2 = jnp.where(right, a, x)
+        b2 = jnp.where(right, x, b)
+        fa2 = jnp.where(right, jnp.where(side == 1, fa * 0.5, fa), fx)
+        fb2 = jnp.where(right, fx, jnp.where(side == -1, fb * 0.5, fb))
+        side2 = jnp.where(right, 1, -1).astype(side.dtype)
+        return a2, b2, fa2, fb2, side2
+
+    side = jnp.zeros(lo.shape, jnp.int32)
+    a, b, fa, fb, side = jax.lax.fori_loop(0, iterations, step, (lo, hi, fa, fb, side))
+    converged = (b - a <= PL_TOLERANCE_M) | (h(b - PL_TOLERANCE_M) >= 0)
+    return b, converged
+
+
+def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
+                       budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS):
+    pr = _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
+                  max_order, all_in_view_weighting)
+    scale = 1.0 - pr.p_not_monitored / (budget.phmi_v + budget.phmi_h)
+    rhs = jnp.stack([0.5 * budget.phmi_h * scale, 0.5 * budget.phmi_h * scale,
+                     budget.phmi_v * scale], axis=-1)  # (..., 3)
+    rhs = jnp.where(rhs > 0, rhs, budget.phmi_v)  # status already marks P_nm > P_thresh
+    coef = jnp.concatenate([jnp.full(pr.prior[..., :1].shape, 2.0), pr.prior[..., 1:]], axis=-1)
+    coef = jnp.broadcast_to(coef[..., None, :], pr.sigma.shape[:-2] + (3, coef.shape[-1]))
+    mean = jnp.swapaxes(pr.threshold + pr.bias, -1, -2)  # (..., 3, K)
+    sd = jnp.swapaxes(pr.sigma, -1, -2)
+    pl, converged = solve_pl(coef, mean, sd, rhs, iterations)
+    status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=-1),
+                       Status.NOT_CONVERGED, pr.status).astype(jnp.int8)
+    ok = status == Status.OK
+    pl = jnp.where(ok[..., None], pl, jnp.inf)
+    hpl = jnp.sqrt(pl[..., 0] ** 2 + pl[..., 1] ** 2)
+    emt_mask = pr.monitored & (pr.prior >= budget.p_emt)
+    emt = jnp.max(jnp.where(emt_mask, pr.threshold[..., 2], 0.0), axis=-1)
+    return MHSSResult(
+        hpl_m=hpl, vpl_m=pl[..., 2], emt_m=jnp.where(ok, emt, jnp.inf),
+        sigma_acc_u_m=jnp.where(ok, pr.sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
+        p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl)
+
+
+_protection_levels_jit = jax.jit(
+    _protection_levels,
+    static_argnames=("budget", "max_order", "all_in_view_weighting", "iterations"))
+
+#: ``max_order=None`` picks the smallest order meeting P_thresh over the batch, up to this
+MAX_AUTO_ORDER = 3
+
+
+def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid):
+    """Broadcast the arguments to the batch shape of ``g`` and check them on the host.
+
+    Raises ValueError naming the argument when a valid source has a non-positive or non-finite
+    variance, a negative bias, a probability outside [0, 1), or a constellation label outside
+    0..C-1 with C = p_const.shape[-1].
+    """
+    g = jnp.asarray(g, jnp.float64)
+    if g.ndim < 2 or g.shape[-1] != 3:
+        raise ValueError(f"g must have shape (..., L, 3) (geometry rows), got {g.shape}")
+    shape = g.shape[:-1]
+    p_const = jnp.asarray(p_const, jnp.float64)
+    if p_const.ndim == 0:
+        raise ValueError("p_const must have a last axis of one entry per constellation (..., C)")
+    C = p_const.shape[-1]
+    p_const = jnp.broadcast_to(p_const, shape[:-1] + (C,))
+    valid = jnp.ones(shape, bool) if valid is None else jnp.broadcast_to(
+        jnp.asarray(valid, bool), shape)
+    constellation = jnp.broadcast_to(jnp.asarray(constellation, jnp.int32), shape)
+    arrays = {name: jnp.broadcast_to(jnp.asarray(x, jnp.float64), shape) for name, x in (
+        ("var_int_m2", var_int_m2), ("var_acc_m2", var_acc_m2), ("b_nom_m", b_nom_m),
+        ("p_sat", p_sat))}
+    try:
+        v = np.asarray(valid)
+        checks = {
+            "var_int_m2": lambda x: np.isfinite(x) & (x > 0),
+            "var_acc_m2": lambda x: np.isfinite(x) & (x > 0),
+            "b_nom_m": lambda x: np.isfinite(x) & (x >= 0),
+            "p_sat": lambda x: (x >= 0) & (x < 1),
+        }
+        for name, good in checks.items():
+            x = np.asarray(arrays[name])
+            bad = v & ~good(x)
+            if bad.any():
+                raise ValueError(f"{name} of a valid source is invalid: {x[bad].ravel()[0]!r} "
+                                 "(variances must be finite and > 0 (m^2), biases >= 0 (m), "
+                                 "probabilities in [0, 1))")
+        pc = np.asarray(p_const)
+        if not np.all((pc >= 0) & (pc < 1)):
+            raise ValueError(f"p_const must lie in [0, 1), got {pc[~((pc >= 0) & (pc < 1))][0]!r}")
+        lab = np.asarray(constellation)
+        if np.any(v & ((lab < 0) | (lab >= C))):
+            raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
+                             f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
+    except jax.errors.ConcretizationTypeError:  # traced: the caller validates outside jit
+        pass
+    return (g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"], arrays["b_nom_m"],
+            arrays["p_sat"], p_const, valid)
+
+
+def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_ORDER):
+    """Smallest order r (number of simultaneously faulty constellations) meeting P_thresh for
+    every geometry of the batch, at most ``cap``."""
+    from araim.fault_modes import faulty_constellation_tail, group_probabilities
+
+    gp = group_probabilities(valid, constellation, p_sat, p_const)
+    r_max = max(1, min(cap, p_const.shape[-1]))
+    tails = np.asarray(faulty_constellation_tail(gp.p_fault, r_max))
+    for r in range(1, r_max + 1):
+        if np.all(tails[..., r - 1] <= p_thresh):
+            return r
+    return r_max
+
+
+def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
+                      budget, valid=None, *, max_order=None, all_in_view_weighting="int"):
+    """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
+
+    Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int
+    and C_acc diagonals, m^2), unlike ``slope_hpl`` which takes standard deviations.
+
+    Args:
+      g: geometry rows (..., L, 3), ``geometry.geometry_rows`` (ENU line-of-sight convention).
+      constellation: (..., L) integer clock-group labels 0..C-1 (GPS 0, Galileo 1, SOP
+        constellations after them).
+      var_int_m2, var_acc_m2: C_int and C_acc diagonals (..., L), see ``araim.error_models``.
+      b_nom_m: nominal bias bound per source (..., L).
+      p_sat: P_s per source (..., L); p_const: P_const per constellation (..., C).
+      budget: ``IntegrityBudget`` (e.g. ``BUDGET_SEED004_TABLE_I``).
+      valid: (..., L) bool, sources used (in view, healthy, not padding).
+      max_order: most simultaneously faulty constellations monitored; None picks the smallest
+        meeting P_thresh over the batch (up to 3). Geometries needing more get status
+        UNMONITORED_RISK.
+      all_in_view_weighting: "int" (C_int^-1, ADD/MAAST, default) or "acc" (seed 004 after
+        eq. 5).
+
+    Returns:
+      ``MHSSResult``; every PL is inf where status != OK, never NaN.
+    """
+    if all_in_view_weighting not in ("int", "acc"):
+        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
+                         f"got {all_in_view_weighting!r}")
+    if not isinstance(budget, IntegrityBudget):
+        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
+                         "araim.BUDGET_SEED004_TABLE_I")
+    args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
+                          valid)
+    if max_order is None:
+        max_order = required_order(args[7], args[1], args[5], args[6], budget.p_thresh)
+    else:
+        max_order = check_int("max_order", max_order, 1)
+    return _protection_levels_jit(*args, budget=budget, max_order=max_order,
+                                  all_in_view_weighting=all_in_view_weighting)
