@@ -98,111 +98,151 @@ def mode_template(n_sources: int, n_constellations: int, max_order: int) -> Mode
                         np.array(other, bool).reshape(-1, co), np.array(order, int))
 
 
+# Internal layout (kernels): per-source arrays (L, B), per-constellation (C, B), per-mode (T, B)
+# and (T, L, B), with one flattened batch axis B LAST, so that every operation is elementwise
+# over the batch and XLA vectorises it (batch-first arrays with a short source axis last ran
+# about 3x slower; DESIGN.md performance notes). Public wrappers take and return batch-first.
+
+
 class GroupProbabilities(NamedTuple):
-    member: jax.Array  # (..., L, C) valid source l belongs to constellation c
-    n_sources: jax.Array  # (..., C) valid sources per constellation
-    present: jax.Array  # (..., C)
-    p_none: jax.Array  # (..., C) 1 for absent constellations
-    p_whole: jax.Array  # (..., C) 0 for absent constellations
-    p_fault: jax.Array  # (..., C) 1 - p_none, computed without cancellation
-    p_single: jax.Array  # (..., L) 0 for padding and for constellations with one source
+    member: jax.Array  # (L, C, B) valid source l belongs to constellation c
+    n_sources: jax.Array  # (C, B) valid sources per constellation
+    present: jax.Array  # (C, B)
+    p_none: jax.Array  # (C, B) 1 for absent constellations
+    p_whole: jax.Array  # (C, B) 0 for absent constellations
+    p_fault: jax.Array  # (C, B) 1 - p_none, computed without cancellation
+    p_single: jax.Array  # (L, B) 0 for padding and for constellations with one source
 
 
 def group_probabilities(valid, constellation, p_sat, p_const) -> GroupProbabilities:
-    """Per-constellation state probabilities (module docstring), stable for tiny P."""
-    C = p_const.shape[-1]
-    member = valid[..., :, None] & (constellation[..., :, None] == jnp.arange(C))
-    p = jnp.where(member, p_sat[..., :, None], 0.0)  # (..., L, C)
+    """Per-constellation state probabilities (module docstring), stable for tiny P.
+
+    Batch-last: valid, constellation, p_sat (L, B); p_const (C, B).
+    """
+    C = p_const.shape[0]
+    member = valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None])
+    p = jnp.where(member, p_sat[:, None, :], 0.0)  # (L, C, B)
     # Poisson-binomial recursion over sources: P(0), P(1), P(>= 2) faulty sources, all sums
     # of non-negative terms (no 1 - (1 - x) cancellation for P ~ 1e-9).
-    p0 = jnp.ones(p.shape[:-2] + (C,))
+    p0 = jnp.ones(p.shape[1:])
     p1 = jnp.zeros_like(p0)
     p2 = jnp.zeros_like(p0)
-    for l in range(p.shape[-2]):
-        pl = p[..., l, :]
+    for l in range(p.shape[0]):
+        pl = p[l]
         p2 = p2 + p1 * pl
         p1 = p1 * (1.0 - pl) + p0 * pl
         p0 = p0 * (1.0 - pl)
-    n_sources = jnp.sum(member, axis=-2)
+    n_sources = jnp.sum(member, axis=0)
     present = n_sources > 0
     pc = jnp.where(present, p_const, 0.0)
     p_none = (1.0 - pc) * p0
     p_fault = jnp.where(present, pc + (1.0 - pc) * (p1 + p2), 0.0)
     p_whole = jnp.where(present, pc + (1.0 - pc) * jnp.where(n_sources == 1, p1 + p2, p2), 0.0)
     # P_single_l = (1 - P_const) P_s,l prod_{l' != l} (1 - P_s,l') = (1 - P_const) p0 P_s / (1 - P_s)
-    own = jnp.sum(jnp.where(member, (1.0 - pc)[..., None, :] * p0[..., None, :], 0.0), axis=-1)
-    big = jnp.sum(jnp.where(member, n_sources[..., None, :] >= 2, False), axis=-1)
+    own = jnp.sum(jnp.where(member, ((1.0 - pc) * p0)[None], 0.0), axis=1)
+    big = jnp.any(member & (n_sources >= 2)[None], axis=1)
     ps = jnp.where(valid, p_sat, 0.0)
     p_single = jnp.where(big, own * ps / (1.0 - ps), 0.0)
     return GroupProbabilities(member, n_sources, present, p_none, p_whole, p_fault, p_single)
 
 
 def faulty_constellation_tail(p_fault, max_order: int):
-    """P(more than k constellations faulty) for k = 1 .. max_order, shape (..., max_order)."""
-    C = p_fault.shape[-1]
-    dist = [jnp.ones(p_fault.shape[:-1])] + [jnp.zeros(p_fault.shape[:-1])] * C
+    """P(more than k constellations faulty) for k = 1 .. max_order: (max_order, B) from
+    p_fault (C, B)."""
+    C = p_fault.shape[0]
+    zero = jnp.zeros(p_fault.shape[1:])
+    dist = [zero + 1.0] + [zero] * C
     for c in range(C):
-        q = p_fault[..., c]
+        q = p_fault[c]
         dist = [dist[0] * (1 - q)] + [dist[k] * (1 - q) + dist[k - 1] * q for k in range(1, C + 1)]
     tails = []
     for k in range(1, max_order + 1):
-        t = jnp.zeros(p_fault.shape[:-1])
+        t = zero
         for j in range(k + 1, C + 1):
             t = t + dist[j]
         tails.append(t)
-    return jnp.stack(tails, axis=-1)
+    return jnp.stack(tails, axis=0)
 
 
 class FaultModes(NamedTuple):
-    excluded: jax.Array  # (..., T, L) bool: sources hypothesised faulty (valid ones only)
-    excluded_constellation: jax.Array  # (..., T, C) bool: constellations excluded whole
-    prior: jax.Array  # (..., T) prior probability assigned to the mode (0 where not live)
-    live: jax.Array  # (..., T) bool: monitored at this geometry's order
-    order: jax.Array  # (...) int: the order r
-    p_beyond_order: jax.Array  # (...) P(more than r constellations faulty)
-    p_no_fault: jax.Array  # (...)
+    excluded: jax.Array  # (T, L, B) bool: sources hypothesised faulty (valid ones only)
+    excluded_constellation: jax.Array  # (T, C, B) bool: constellations excluded whole
+    prior: jax.Array  # (T, B) prior probability assigned to the mode (0 where not live)
+    live: jax.Array  # (T, B) bool: monitored at this geometry's order
+    order: jax.Array  # (B,) int: the order r
+    p_beyond_order: jax.Array  # (B,) P(more than r constellations faulty)
+    p_no_fault: jax.Array  # (B,)
 
 
-def fault_modes(valid, constellation, p_sat, p_const, p_thresh, max_order: int) -> FaultModes:
-    """Live modes, exclusion sets and priors for every geometry of a batch (static template)."""
-    C = p_const.shape[-1]
-    L = valid.shape[-1]
+def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_order: int):
+    """Live modes, exclusion sets and priors (static template), batch-last layout."""
+    C = p_const.shape[0]
+    L = valid.shape[0]
     tpl = mode_template(L, C, max_order)
     gp = group_probabilities(valid, constellation, p_sat, p_const)
     R = min(max_order, C)
-    tails = faulty_constellation_tail(gp.p_fault, R)  # (..., R)
+    tails = faulty_constellation_tail(gp.p_fault, R)  # (R, B)
     ok = tails <= p_thresh
-    order = jnp.where(jnp.any(ok, axis=-1), jnp.argmax(ok, axis=-1) + 1, R)
-    p_beyond = jnp.take_along_axis(tails, (order - 1)[..., None], axis=-1)[..., 0]
+    order = jnp.where(jnp.any(ok, axis=0), jnp.argmax(ok, axis=0) + 1, R)
+    p_beyond = jnp.take_along_axis(tails, (order - 1)[None], axis=0)[0]
 
-    src = jnp.asarray(tpl.source)
-    resolved = src >= 0
-    srci = jnp.maximum(src, 0)
-    # constellation of each mode's resolved source, (..., T)
-    a = jnp.take(constellation, srci, axis=-1)
-    cidx = jnp.arange(C)
-    rel = cidx - (cidx > a[..., None])  # (..., T, C) index among the other constellations
-    rel = jnp.clip(rel, 0, max(C - 2, 0))
-    other = jnp.take_along_axis(
-        jnp.broadcast_to(jnp.asarray(tpl.other), a.shape + (tpl.other.shape[-1],)), rel, axis=-1)
-    other = other & (cidx != a[..., None])
-    excl_c = jnp.where(resolved[:, None], other, jnp.asarray(tpl.whole))  # (..., T, C)
+    src = np.asarray(tpl.source)
+    resolved = jnp.asarray(src >= 0)[:, None]  # (T, 1)
+    srci = np.maximum(src, 0)
+    lab = jnp.clip(constellation, 0, C - 1)
+    a = lab[srci]  # (T, B) constellation of each mode's resolved source
+    cidx = jnp.arange(C)[None, :, None]
+    rel = jnp.clip(cidx - (cidx > a[:, None, :]), 0, max(C - 2, 0))  # (T, C, B)
+    tpl_other = jnp.asarray(tpl.other)[:, :, None]
+    other = jnp.take_along_axis(jnp.broadcast_to(tpl_other, tpl_other.shape[:2] + a.shape[-1:]),
+                                rel, axis=1)
+    other = other & (cidx != a[:, None, :])
+    excl_c = jnp.where(resolved[:, :, None], other, jnp.asarray(tpl.whole)[:, :, None])
 
-    present = gp.present[..., None, :]
-    all_present = jnp.all(~excl_c | present, axis=-1)
-    n_a = jnp.take_along_axis(gp.n_sources, a, axis=-1)
-    src_ok = jnp.take(valid, srci, axis=-1) & (n_a >= 2)
-    live = all_present & jnp.where(resolved, src_ok, True) & (jnp.asarray(tpl.order) <= order[..., None])
+    all_present = jnp.all(~excl_c | gp.present[None], axis=1)  # (T, B)
+    n_a = jnp.take_along_axis(gp.n_sources, a, axis=0)
+    src_ok = valid[srci] & (n_a >= 2)
+    live = (all_present & jnp.where(resolved, src_ok, True)
+            & (jnp.asarray(tpl.order)[:, None] <= order[None]))
 
-    pn, pw, pf = (x[..., None, :] for x in (gp.p_none, gp.p_whole, gp.p_fault))
-    before = cidx < a[..., None]
-    factor_resolved = jnp.where(excl_c, jnp.where(before, pw, pf), jnp.where(cidx == a[..., None], 1.0, pn))
+    pn, pw, pf = (x[None] for x in (gp.p_none, gp.p_whole, gp.p_fault))
+    before = cidx < a[:, None, :]
+    own = cidx == a[:, None, :]
+    factor_resolved = jnp.where(excl_c, jnp.where(before, pw, pf), jnp.where(own, 1.0, pn))
     factor_whole = jnp.where(excl_c, pw, pn)
-    prod = jnp.prod(jnp.where(resolved[:, None], factor_resolved, factor_whole), axis=-1)
-    p_single = jnp.take(gp.p_single, srci, axis=-1)
-    prior = jnp.where(live, jnp.where(resolved, p_single, 1.0) * prod, 0.0)
+    prod = jnp.prod(jnp.where(resolved[:, :, None], factor_resolved, factor_whole), axis=1)
+    prior = jnp.where(live, jnp.where(resolved, gp.p_single[srci], 1.0) * prod, 0.0)
 
-    member_excl = jnp.any(gp.member[..., None, :, :] & excl_c[..., :, None, :], axis=-1)  # (..., T, L)
-    excluded = valid[..., None, :] & (member_excl | (jnp.arange(L) == src[:, None]))
+    # excluded[t, l] = the constellation of l is excluded whole in t, or l is t's source
+    lab_b = jnp.broadcast_to(lab[None], (excl_c.shape[0],) + lab.shape)
+    member_excl = jnp.take_along_axis(excl_c, lab_b, axis=1)  # (T, L, B)
+    is_src = jnp.asarray(np.arange(L)[None, :] == src[:, None])[:, :, None]
+    excluded = valid[None] & (member_excl | is_src)
     return FaultModes(excluded, excl_c, prior, live, order, p_beyond,
-                      jnp.prod(gp.p_none, axis=-1))
+                      jnp.prod(gp.p_none, axis=0))
+
+
+def to_batch_last(x, event_dims: int):
+    """(..., e1..ek) -> (e1..ek, B) with the batch axes flattened."""
+    batch = x.shape[:x.ndim - event_dims]
+    x = x.reshape((-1,) + x.shape[x.ndim - event_dims:]) if batch else x[None]
+    return jnp.moveaxis(x, 0, -1)
+
+
+def to_batch_first(x, batch_shape):
+    """(e1..ek, B) -> (batch..., e1..ek)."""
+    x = jnp.moveaxis(x, -1, 0)
+    return x.reshape(tuple(batch_shape) + x.shape[1:])
+
+
+def fault_modes(valid, constellation, p_sat, p_const, p_thresh, max_order: int) -> FaultModes:
+    """Batch-first ``fault_modes_batch_last``: valid, constellation, p_sat (..., L), p_const
+    (..., C); returns arrays (..., T, L), (..., T, C), (..., T) and (...)."""
+    valid = jnp.asarray(valid, bool)
+    batch = valid.shape[:-1]
+    args = [to_batch_last(jnp.broadcast_to(jnp.asarray(x), valid.shape), 1)
+            for x in (valid, constellation, p_sat)]
+    pc = to_batch_last(jnp.broadcast_to(jnp.asarray(p_const, jnp.float64),
+                                        batch + jnp.shape(p_const)[-1:]), 1)
+    fm = fault_modes_batch_last(*args, pc, p_thresh, max_order)
+    return FaultModes(*(to_batch_first(x, batch) for x in fm))

@@ -35,15 +35,17 @@ import numpy as np
 from jax.scipy.special import erfc, ndtri
 
 from araim import linalg
+from araim.batching import map_chunks
 from araim.budget import IntegrityBudget
-from araim.fault_modes import fault_modes
+from araim.fault_modes import fault_modes_batch_last, to_batch_first, to_batch_last
 from araim.status import Status
 from araim.validate import check_int
 
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
-#: Illinois iterations; measured: converged for every geometry of the tests and benchmarks
-PL_ITERATIONS = 14
+#: Illinois iterations. Measured on 65,536 geometries (9 GPS + 4 SOPs, Table I): 6 suffice for
+#: 1e-3 m, 7 give 1e-10 m; 10 leave a margin. Non-convergence is reported (NOT_CONVERGED).
+PL_ITERATIONS = 10
 _SQRT1_2 = 0.7071067811865476
 
 
@@ -70,120 +72,134 @@ class MHSSResult(NamedTuple):
 
 
 class Projection(NamedTuple):
-    """Everything the PL equations and the solution-separation test need, per mode."""
+    """Everything the PL equations and the solution-separation test need, per mode.
 
-    s_pos: jax.Array  # (..., K, 3, L) position rows of S^(i) (i = 0 all-in-view)
-    sigma: jax.Array  # (..., K, 3) sigma_q^(i)
-    bias: jax.Array  # (..., K, 3) b_q^(i)
-    sigma_ss: jax.Array  # (..., K, 3) sigma_ss,q^(i) (0 for i = 0)
-    threshold: jax.Array  # (..., K, 3) T_i,q (0 for i = 0)
-    monitored: jax.Array  # (..., K) live and nonsingular, False for i = 0
-    prior: jax.Array  # (..., K) P_f^(i), 0 for i = 0
-    excluded: jax.Array  # (..., K, L) sources hypothesised faulty
-    n_modes: jax.Array  # (...)
-    p_not_monitored: jax.Array  # (...)
-    order: jax.Array  # (...)
-    status: jax.Array  # (...) status before root finding
-    sigma_acc_u: jax.Array  # (...)
+    Batch-last inside the kernels (one flattened batch axis B last); K = 1 + candidate modes,
+    mode 0 the all-in-view solution."""
+
+    s_pos: jax.Array  # (K, 3, L, B) position rows of S^(i)
+    sigma: jax.Array  # (K, 3, B) sigma_q^(i)
+    bias: jax.Array  # (K, 3, B) b_q^(i)
+    sigma_ss: jax.Array  # (K, 3, B) sigma_ss,q^(i) (0 for i = 0)
+    threshold: jax.Array  # (K, 3, B) T_i,q (0 for i = 0 and for unmonitored modes)
+    monitored: jax.Array  # (K, B) live and nonsingular, False for i = 0
+    prior: jax.Array  # (K, B) P_f^(i) of monitored modes, 0 otherwise
+    excluded: jax.Array  # (K, L, B) sources hypothesised faulty (none for i = 0)
+    n_modes: jax.Array  # (B,)
+    p_not_monitored: jax.Array  # (B,)
+    order: jax.Array  # (B,)
+    status: jax.Array  # (B,) status before root finding
+    sigma_acc_u: jax.Array  # (B,)
 
 
 def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
              max_order, all_in_view_weighting):
-    C = p_const.shape[-1]
-    fm = fault_modes(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
-    g = jnp.where(valid[..., None], g, 0.0)
+    """Batch-last: g (L, 3, B); constellation, var_*, b_nom, p_sat, valid (L, B); p_const
+    (C, B)."""
+    C = p_const.shape[0]
+    fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
+                                max_order)
+    g = jnp.where(valid[:, None, :], g, 0.0)
     w_int = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid)
     var_acc = jnp.where(valid, var_acc, 0.0)
     var_int = jnp.where(valid, var_int, 0.0)
     b_nom = jnp.where(valid, b_nom, 0.0)
-    member = valid[..., :, None] & (constellation[..., :, None] == jnp.arange(C))  # (..., L, C)
+    member = valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None])
 
-    keep = jnp.concatenate([valid[..., None, :], valid[..., None, :] & ~fm.excluded], axis=-2)
-    w = jnp.where(keep, w_int[..., None, :], 0.0)  # (..., K, L)
+    keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
+    w = jnp.where(keep, w_int[None], 0.0)
     if all_in_view_weighting == "acc":
         w_acc = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
-        w = w.at[..., 0, :].set(w_acc)
-    cols = [g[..., None, :, 0], g[..., None, :, 1], g[..., None, :, 2]]
-    cols += [member[..., None, :, c].astype(g.dtype) for c in range(C)]
-    n = linalg.normal_entries(cols, w)
-    kept_c = jnp.any(keep[..., :, :, None] & member[..., None, :, :], axis=-2)  # (..., K, C)
+        w = w.at[0].set(w_acc)
+    cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
+    cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
+    n_states = 3 + C
+    wc = [w * c for c in cols]
+    n = [[None] * n_states for _ in range(n_states)]
+    for i in range(n_states):
+        for j in range(i + 1):
+            n[i][j] = n[j][i] = jnp.sum(wc[i] * cols[j], axis=1)  # (K, B)
+    kept_c = jnp.any(keep[:, :, None, :] & member[None], axis=1)  # (K, C, B)
     for c in range(C):
-        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[..., c], 0.0, 1.0)
+        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
     lower, nonsingular = linalg.cholesky(n)
     zero = jnp.zeros_like(n[0][0])
-    y = [linalg.cholesky_solve(lower, [jnp.where(j == q, 1.0, 0.0) + zero
-                                       for j in range(3 + C)]) for q in range(3)]
-    # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}: (..., K, L) per q
-    s_pos = [w * sum(y[q][a][..., None] * cols[a] for a in range(3 + C)) for q in range(3)]
-    s_pos = jnp.stack(s_pos, axis=-2)  # (..., K, 3, L)
-    var_pos = jnp.stack([y[q][q] for q in range(3)], axis=-1)  # (..., K, 3)
+    y = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0)
+                                       for j in range(n_states)]) for q in range(3)]
+    # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}
+    s_pos = jnp.stack([w * sum(y[q][a][:, None, :] * cols[a] for a in range(n_states))
+                       for q in range(3)], axis=1)  # (K, 3, L, B)
+    var_pos = jnp.stack([y[q][q] for q in range(3)], axis=1)  # (K, 3, B)
     if all_in_view_weighting == "acc":
-        var0 = jnp.sum(s_pos[..., 0, :, :] ** 2 * var_int[..., None, :], axis=-1)
-        var_pos = var_pos.at[..., 0, :].set(var0)
+        var_pos = var_pos.at[0].set(jnp.sum(s_pos[0] ** 2 * var_int[None], axis=1))
 
-    live = jnp.concatenate([jnp.zeros_like(fm.live[..., :1]), fm.live], axis=-1)
-    prior_all = jnp.concatenate([jnp.zeros_like(fm.prior[..., :1]), fm.prior], axis=-1)
+    false0 = jnp.zeros_like(fm.live[:1])
+    live = jnp.concatenate([false0, fm.live], axis=0)
+    prior_all = jnp.concatenate([jnp.zeros_like(fm.prior[:1]), fm.prior], axis=0)
     monitored = live & nonsingular
-    aiv_ok = nonsingular[..., 0]
-    usable = monitored.at[..., 0].set(aiv_ok)
-    s_pos = jnp.where(usable[..., None, None], s_pos, 0.0)
-    sigma = jnp.sqrt(jnp.where(usable[..., None], jnp.maximum(var_pos, 0.0), 1.0))
-    bias = jnp.sum(jnp.abs(s_pos) * b_nom[..., None, None, :], axis=-1)
-    d = s_pos - s_pos[..., :1, :, :]
-    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[..., None, None, :], axis=-1))
+    aiv_ok = nonsingular[0]
+    usable = monitored.at[0].set(aiv_ok)
+    s_pos = jnp.where(usable[:, None, None, :], s_pos, 0.0)
+    sigma = jnp.sqrt(jnp.where(usable[:, None, :], jnp.maximum(var_pos, 0.0), 1.0))
+    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
+    d = s_pos - s_pos[:1]
+    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[None, None], axis=2))
 
-    n_modes = jnp.sum(monitored, axis=-1)
+    n_modes = jnp.sum(monitored, axis=0)
     nf = jnp.maximum(n_modes, 1).astype(g.dtype)
     k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
     k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
-    k_fa = jnp.stack([k_h, k_h, k_v], axis=-1)  # (..., 3)
-    threshold = jnp.where(monitored[..., None], k_fa[..., None, :] * sigma_ss, 0.0)
+    k_fa = jnp.stack([k_h, k_h, k_v], axis=0)  # (3, B)
+    threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
     prior = jnp.where(monitored, prior_all, 0.0)
-    p_nm = fm.p_beyond_order + jnp.sum(jnp.where(live & ~nonsingular, prior_all, 0.0), axis=-1)
+    p_nm = fm.p_beyond_order + jnp.sum(jnp.where(live & ~nonsingular, prior_all, 0.0), axis=0)
 
-    n_valid = jnp.sum(valid, axis=-1)
-    n_present = jnp.sum(jnp.any(member, axis=-2), axis=-1)
+    n_valid = jnp.sum(valid, axis=0)
+    n_present = jnp.sum(jnp.any(member, axis=0), axis=0)
     status = jnp.where(
         n_valid < 3 + n_present + 1, Status.TOO_FEW_SOURCES,
         jnp.where(~aiv_ok, Status.SINGULAR_GEOMETRY,
                   jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK)))
-    sigma_acc_u = jnp.sqrt(jnp.sum(s_pos[..., 0, 2, :] ** 2 * var_acc, axis=-1))
-    return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[..., 0].set(False),
-                      prior, keep[..., 1:, :] != valid[..., None, :], n_modes, p_nm,
-                      fm.order, status.astype(jnp.int8), sigma_acc_u)
+    sigma_acc_u = jnp.sqrt(jnp.sum(s_pos[0, 2] ** 2 * var_acc, axis=0))
+    excluded = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)
+    return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[0].set(False),
+                      prior, excluded, n_modes, p_nm, fm.order, status.astype(jnp.int8),
+                      sigma_acc_u)
 
 
 def _log_risk(x, coef, mean, sd):
-    """log of sum_j coef_j Q((x - mean_j) / sd_j) for x of shape (...), terms (..., J)."""
-    return jnp.log(jnp.sum(coef * q_function((x[..., None] - mean) / sd), axis=-1))
+    """log of sum_j coef_j Q((x - mean_j) / sd_j); terms on axis 0, x of shape coef.shape[1:]."""
+    return jnp.log(jnp.sum(coef * q_function((x[None] - mean) / sd), axis=0))
 
 
 def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
-    """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs, batched over leading axes.
+    """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs; terms on axis 0 (J, ...), rhs (...).
 
-    coef >= 0 (terms with coef 0 are ignored; sd must then still be > 0), rhs > 0, and at least
-    one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged).
+    coef >= 0 (terms with coef 0 are ignored; their sd must still be > 0), rhs > 0, and at least
+    one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged): pl is the
+    upper end of the final bracket (never below the root), converged says it lies within
+    ``PL_TOLERANCE_M`` of the root.
     """
     active = coef > 0
-    n_terms = jnp.sum(active, axis=-1).astype(coef.dtype)
+    n_terms = jnp.sum(active, axis=0).astype(coef.dtype)
     safe = jnp.where(active, coef, 1.0)
-    p_lo = rhs[..., None] / safe
-    p_hi = rhs[..., None] / (n_terms[..., None] * safe)
+    p_lo = rhs[None] / safe
+    p_hi = rhs[None] / (n_terms[None] * safe)
+    # lo: one term alone reaches the budget; hi: every term at most budget / n_terms
     lo = jnp.max(jnp.where(active & (p_lo < 1),
                            mean + sd * q_inverse(jnp.where(p_lo < 1, p_lo, 0.5)), -jnp.inf),
-                 axis=-1)
+                 axis=0)
     hi = jnp.max(jnp.where(active & (p_hi < 1),
                            mean + sd * q_inverse(jnp.where(p_hi < 1, p_hi, 0.5)), -jnp.inf),
-                 axis=-1)
+                 axis=0)
     log_rhs = jnp.log(rhs)
 
     def h(x):
         return _log_risk(x, coef, mean, sd) - log_rhs
 
-    fa, fb = h(lo), h(hi)
-    fa = jnp.maximum(fa, 0.0)  # h(lo) >= 0 and h(hi) <= 0 by construction; clip rounding
-    fb = jnp.minimum(fb, 0.0)
+    fa = jnp.maximum(h(lo), 0.0)  # >= 0 and <= 0 by construction; clip rounding
+    fb = jnp.minimum(h(hi), 0.0)
 
     def step(_, carry):
         a, b, fa, fb, side = carry
@@ -195,6 +211,7 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
         right = fx <= 0  # x becomes the new upper end b
         a2 = jnp.where(right, a, x)
         b2 = jnp.where(right, x, b)
+        # Illinois: halve the value kept at an end that survives twice in a row
         fa2 = jnp.where(right, jnp.where(side == 1, fa * 0.5, fa), fx)
         fb2 = jnp.where(right, fx, jnp.where(side == -1, fb * 0.5, fb))
         side2 = jnp.where(right, 1, -1).astype(side.dtype)
@@ -206,30 +223,59 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
     return b, converged
 
 
-def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
-                       budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS):
-    pr = _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
-                  max_order, all_in_view_weighting)
+def _pls_from_projection(pr, budget, iterations):
+    """PLs (3, B), status (B,), EMT (B,) from a batch-last Projection."""
     scale = 1.0 - pr.p_not_monitored / (budget.phmi_v + budget.phmi_h)
     rhs = jnp.stack([0.5 * budget.phmi_h * scale, 0.5 * budget.phmi_h * scale,
-                     budget.phmi_v * scale], axis=-1)  # (..., 3)
+                     budget.phmi_v * scale], axis=0)  # (3, B)
     rhs = jnp.where(rhs > 0, rhs, budget.phmi_v)  # status already marks P_nm > P_thresh
-    coef = jnp.concatenate([jnp.full(pr.prior[..., :1].shape, 2.0), pr.prior[..., 1:]], axis=-1)
-    coef = jnp.broadcast_to(coef[..., None, :], pr.sigma.shape[:-2] + (3, coef.shape[-1]))
-    mean = jnp.swapaxes(pr.threshold + pr.bias, -1, -2)  # (..., 3, K)
-    sd = jnp.swapaxes(pr.sigma, -1, -2)
-    pl, converged = solve_pl(coef, mean, sd, rhs, iterations)
-    status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=-1),
+    coef = pr.prior.at[0].set(2.0)  # (K, B)
+    coef = jnp.broadcast_to(coef[:, None, :], pr.sigma.shape)  # (K, 3, B)
+    pl, converged = solve_pl(coef, pr.threshold + pr.bias, pr.sigma, rhs, iterations)
+    status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=0),
                        Status.NOT_CONVERGED, pr.status).astype(jnp.int8)
     ok = status == Status.OK
-    pl = jnp.where(ok[..., None], pl, jnp.inf)
-    hpl = jnp.sqrt(pl[..., 0] ** 2 + pl[..., 1] ** 2)
+    pl = jnp.where(ok[None], pl, jnp.inf)
     emt_mask = pr.monitored & (pr.prior >= budget.p_emt)
-    emt = jnp.max(jnp.where(emt_mask, pr.threshold[..., 2], 0.0), axis=-1)
-    return MHSSResult(
-        hpl_m=hpl, vpl_m=pl[..., 2], emt_m=jnp.where(ok, emt, jnp.inf),
+    emt = jnp.where(ok, jnp.max(jnp.where(emt_mask, pr.threshold[:, 2], 0.0), axis=0), jnp.inf)
+    return pl, status, emt
+
+
+def _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid):
+    tl = to_batch_last
+    return (tl(g, 2), tl(constellation, 1), tl(var_int, 1), tl(var_acc, 1), tl(b_nom, 1),
+            tl(p_sat, 1), tl(p_const, 1), tl(valid, 1))
+
+
+def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
+                            budget, max_order, all_in_view_weighting, iterations):
+    """One flat batch (B, ...) in and out; batch-last inside."""
+    args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
+    pr = _project(*args, budget, max_order, all_in_view_weighting)
+    pl, status, emt = _pls_from_projection(pr, budget, iterations)
+    ok = status == Status.OK
+    out = MHSSResult(
+        hpl_m=jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), vpl_m=pl[2], emt_m=emt,
         sigma_acc_u_m=jnp.where(ok, pr.sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
         p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl)
+    return MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+
+
+def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
+                       budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS):
+    """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
+    cache-sized chunks (``araim.batching``)."""
+    batch = g.shape[:-2]
+    L, C = g.shape[-2], p_const.shape[-1]
+    arrays = [jnp.broadcast_to(x, batch + s) for x, s in (
+        (g, (L, 3)), (constellation, (L,)), (var_int, (L,)), (var_acc, (L,)), (b_nom, (L,)),
+        (p_sat, (L,)), (p_const, (C,)), (valid, (L,)))]
+
+    def kernel(*xs):
+        return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
+                                       iterations)
+
+    return map_chunks(kernel, arrays, batch)
 
 
 _protection_levels_jit = jax.jit(
@@ -295,11 +341,12 @@ def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_
     every geometry of the batch, at most ``cap``."""
     from araim.fault_modes import faulty_constellation_tail, group_probabilities
 
-    gp = group_probabilities(valid, constellation, p_sat, p_const)
+    gp = group_probabilities(to_batch_last(valid, 1), to_batch_last(constellation, 1),
+                             to_batch_last(p_sat, 1), to_batch_last(p_const, 1))
     r_max = max(1, min(cap, p_const.shape[-1]))
     tails = np.asarray(faulty_constellation_tail(gp.p_fault, r_max))
     for r in range(1, r_max + 1):
-        if np.all(tails[..., r - 1] <= p_thresh):
+        if np.all(tails[r - 1] <= p_thresh):
             return r
     return r_max
 
