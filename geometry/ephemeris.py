@@ -1,0 +1,426 @@
+"""GPS and Galileo broadcast ephemerides from RINEX 2 / 3 navigation files.
+
+Parsing: georinex (plain or gzipped files), after a structural check of our own that names the
+file and line of anything malformed or truncated (georinex's own errors do not). The
+propagation is ours (``geometry.kepler``: IS-GPS-200 20.3.3.4.3; Galileo OS SIS ICD 5.1.1),
+vectorized over epochs x satellites in JAX.
+
+Record choice, per epoch and satellite: the *healthy* record nearest in time (|t - t_oe|),
+within ``max_age_s`` (default 4 h: the GPS fit interval is 4 h and Galileo's validity is 4 h,
+Galileo OS SDD; a single-station file may lack late records, and for geometry an extrapolated
+orbit is good to metres-to-hundreds-of-metres, i.e. milli-degrees of direction). The age is
+returned so a caller can tighten it. A satellite is used at t only if
+
+* over the whole file more than half of its records are healthy (a satellite flagged unhealthy
+  all day may carry a lone record with health 0 that is not a usable orbit: G01 of
+  ``brdc1820.10n`` disagrees with the precise orbit by 41,000 km), and
+* no unhealthy record is nearer to t than the chosen healthy one (a health flag raised in the
+  file holds until the next healthy record takes over).
+
+GPS records are healthy when the health word is 0; Galileo records when the signal health and
+data-validity bits are all 0 (RINEX 3.04 Table A8). Records with implausible orbits
+(sqrt(A) outside [5000, 5700] m^1/2, e outside [0, 0.3]) are dropped and counted.
+"""
+
+import functools
+import gzip
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from geometry import gpstime
+from geometry.kepler import (
+    F_GAL_S_SQRT_M,
+    F_GPS_S_SQRT_M,
+    MU_GAL_M3_S2,
+    MU_GPS_M3_S2,
+    OrbitElements,
+    clock_polynomial_s,
+    orbit_ecef,
+    relativistic_clock_s,
+)
+
+#: constellation codes of ``geometry.sky`` (DESIGN.md: GPS 0, Galileo 1)
+GPS, GALILEO = 0, 1
+SYSTEM_CODES = {"G": GPS, "E": GALILEO}
+SYSTEM_NAMES = {GPS: "GPS", GALILEO: "Galileo"}
+
+#: default validity window |t - t_oe| for choosing a record (see the module docstring)
+DEFAULT_MAX_AGE_S = 4 * 3600.0
+
+#: plausibility of a record's orbit: GPS sqrt(A) ~ 5153.7, Galileo ~ 5440.6 m^1/2; the Galileo
+#: satellites E14/E18 in their eccentric orbits have e ~ 0.16
+SQRT_A_RANGE = (5000.0, 5700.0)
+E_MAX = 0.3
+
+#: RINEX 3 lines per navigation record by system (RINEX 3.03 Tables A6-A14)
+_RINEX3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
+_FIELD = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([EeDd][-+]?\d+)?\s*$")
+
+
+class NavigationFileError(ValueError):
+    """A navigation file that cannot be read: names the file, the line and how to fix it."""
+
+
+def _open_text(path: Path):
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", encoding="ascii", errors="replace")
+    return open(path, encoding="ascii", errors="replace")
+
+
+def _check_fields(path, lineno, line, start, n_fields):
+    """The 19-character D/E-format numeric fields of a data line: blank or a number."""
+    for k in range(n_fields):
+        a, b = start + 19 * k, start + 19 * (k + 1)
+        field = line[a:b]
+        if field.strip() and not _FIELD.match(field):
+            raise NavigationFileError(
+                f"{path}: line {lineno}, columns {a + 1}-{b}: cannot read {field.strip()!r} as a "
+                "number; the file is malformed (re-download it or fix that record)")
+
+
+def check_navigation_file(path) -> dict:
+    """Structural check of a RINEX 2 (GPS) or 3 navigation file before georinex parses it.
+
+    Returns the header facts ``{"version", "records", "systems"}``. Raises
+    ``NavigationFileError`` naming the file and the line for a missing or malformed header, a
+    record whose first line is not a record start, a non-numeric field, or a file that ends
+    inside a record (truncated download).
+    """
+    path = Path(path)
+    try:
+        with _open_text(path) as f:
+            lines = f.read().splitlines()
+    except (OSError, EOFError, gzip.BadGzipFile) as e:
+        raise NavigationFileError(f"{path}: cannot read the file ({e}); check the path and that "
+                                  "a .gz file is complete") from None
+    if not lines:
+        raise NavigationFileError(f"{path}: line 1: the file is empty")
+    head = lines[0]
+    try:
+        version = float(head[:9])
+    except ValueError:
+        raise NavigationFileError(
+            f"{path}: line 1: not a RINEX header (expected 'RINEX VERSION / TYPE' with the "
+            f"version in columns 1-9, got {head[:40]!r})") from None
+    file_type = head[20:21]
+    if "RINEX VERSION / TYPE" not in head or file_type not in ("N", "n"):
+        raise NavigationFileError(
+            f"{path}: line 1: not a RINEX navigation file (type {file_type!r} in column 21; "
+            "GPS RINEX 2 'N' or RINEX 3 'N' files are supported)")
+    if not (2.0 <= version < 4.0):
+        raise NavigationFileError(f"{path}: line 1: RINEX version {version:g} is not supported "
+                                  "(2.x and 3.x are)")
+    end = next((k for k, s in enumerate(lines) if "END OF HEADER" in s[60:80]), None)
+    if end is None:
+        raise NavigationFileError(f"{path}: line {len(lines)}: no 'END OF HEADER' line; the "
+                                  "header is truncated or malformed")
+    rinex3 = version >= 3.0
+    k, records, systems = end + 1, 0, set()
+    while k < len(lines):
+        line = lines[k]
+        if not line.strip():
+            k += 1
+            continue
+        if rinex3:
+            sysch = line[0]
+            if sysch not in _RINEX3_LINES or not line[1:3].strip().isdigit():
+                raise NavigationFileError(
+                    f"{path}: line {k + 1}: expected a record start 'Snn YYYY MM DD hh mm ss' "
+                    f"(system letter and satellite number), got {line[:23]!r}")
+            n_lines, first_start, data_start = _RINEX3_LINES[sysch], 23, 4
+        else:
+            sysch = "G"
+            if not line[0:2].strip().isdigit():
+                raise NavigationFileError(
+                    f"{path}: line {k + 1}: expected a record start 'PRN YY MM DD hh mm ss.s', "
+                    f"got {line[:22]!r}")
+            n_lines, first_start, data_start = 8, 22, 3
+        if k + n_lines > len(lines):
+            raise NavigationFileError(
+                f"{path}: line {len(lines)}: the file ends inside the record that starts at "
+                f"line {k + 1} ({line[:3].strip()}): {n_lines} lines expected, "
+                f"{len(lines) - k} present; the file is truncated (re-download it)")
+        date = line[4:23] if rinex3 else line[2:22]
+        if not re.fullmatch(r"[\s\d.]+", date):
+            raise NavigationFileError(
+                f"{path}: line {k + 1}: cannot read the record epoch {date.strip()!r}")
+        _check_fields(path, k + 1, line, first_start, 3)
+        for j in range(1, n_lines):
+            _check_fields(path, k + j + 1, lines[k + j], data_start, 4)
+        records += 1
+        systems.add(sysch)
+        k += n_lines
+    if records == 0:
+        raise NavigationFileError(f"{path}: line {len(lines)}: the file has a header but no "
+                                  "navigation records")
+    return {"version": version, "records": records, "systems": sorted(systems)}
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed_records(path_str: str, mtime_ns: int, size: int, systems: tuple):
+    """georinex parse -> flat NumPy record table, cached per (file, mtime, size, systems).
+
+    georinex needs ~2 s for a daily multi-GNSS RINEX 3 file on these machines (0.05 s for a
+    RINEX 2 GPS file); a study, a test module or the benchmark that loads the same file again
+    gets it from here.
+    """
+    import georinex
+
+    info = check_navigation_file(path_str)
+    use = [s for s in systems if s in info["systems"]]
+    if not use:
+        raise NavigationFileError(
+            f"{path_str}: no {'/'.join(systems)} records (the file holds "
+            f"{', '.join(info['systems'])}); give a file with GPS or Galileo ephemerides")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # georinex/xarray FutureWarnings on merge defaults
+        try:
+            ds = georinex.load(path_str, use=use) if info["version"] >= 3 else georinex.load(
+                path_str)
+        except Exception as e:  # georinex raises assorted types; one message for the user
+            raise NavigationFileError(f"{path_str}: georinex could not parse the file "
+                                      f"({type(e).__name__}: {e})") from None
+    return _record_table(ds, systems, path_str)
+
+
+def _var(ds, name, n_time, n_sv):
+    if name in ds:
+        return np.asarray(ds[name].values, np.float64)
+    return np.full((n_time, n_sv), np.nan)
+
+
+def _record_table(ds, systems, path_str):
+    svs = [str(s) for s in ds["sv"].values]
+    nt, ns = ds.sizes["time"], len(svs)
+    toc = gpstime.from_datetime64(ds["time"].values)
+    names = ("SVclockBias", "SVclockDrift", "SVclockDriftRate", "Crs", "DeltaN", "M0", "Cuc",
+             "Eccentricity", "Cus", "sqrtA", "Toe", "Cic", "Omega0", "Cis", "Io", "Crc", "omega",
+             "OmegaDot", "IDOT", "health", "GPSWeek", "GALWeek")
+    v = {n: _var(ds, n, nt, ns) for n in names}
+    rows = []
+    for j, sv in enumerate(svs):
+        sysch = sv[0]
+        if sysch not in systems:
+            continue
+        week = v["GPSWeek"][:, j] if sysch == "G" else v["GALWeek"][:, j]
+        present = np.isfinite(v["sqrtA"][:, j]) & np.isfinite(v["Toe"][:, j])
+        for i in np.flatnonzero(present):
+            rows.append((sv[:3], i, j, week[i]))
+    if not rows:
+        raise NavigationFileError(f"{path_str}: no usable {'/'.join(systems)} records")
+    sv_name = np.array([r[0] for r in rows])
+    ti = np.array([r[1] for r in rows])
+    sj = np.array([r[2] for r in rows])
+    week = np.array([r[3] for r in rows])
+    table = {n: v[n][ti, sj] for n in names if n not in ("GPSWeek", "GALWeek")}
+    table["sv"] = sv_name
+    table["toc_s"] = toc[ti]
+    week = np.where(np.isfinite(week), week, gpstime.week_tow(toc[ti])[0])
+    week = gpstime.resolve_week(week.astype(np.int64), toc[ti])
+    toe_abs = gpstime.from_week_tow(week, table["Toe"])
+    # a t_oe more than half a week from t_oc belongs to the neighbouring week (week numbers
+    # written with t_oc's week near a week boundary)
+    toe_abs = toe_abs - gpstime.SECONDS_PER_WEEK * np.round((toe_abs - table["toc_s"])
+                                                            / gpstime.SECONDS_PER_WEEK)
+    table["toe_s"] = toe_abs
+    table["health"] = np.where(np.isfinite(table["health"]), table["health"], 0.0)
+    for arr in table.values():
+        if arr.dtype.kind == "f":
+            np.nan_to_num(arr, copy=False)  # blank optional fields (e.g. a_f2) read as NaN
+    return table
+
+
+class SatState(NamedTuple):
+    ecef_m: jax.Array  # (T, S, 3) ECEF at t, metres (0 where not valid)
+    clock_s: jax.Array  # (T, S) satellite clock offset dt_sv incl. relativistic term, seconds
+    valid: jax.Array  # (T, S) bool
+    age_s: jax.Array  # (T, S) t - t_oe of the record used (0 where not valid)
+    prns: np.ndarray  # (S,) names such as 'G05', 'E11'
+
+
+class Ephemeris:
+    """Broadcast ephemerides of one navigation file, padded to arrays (S satellites x R records).
+
+    Use ``geometry.load_navigation(path)``. Attributes: ``prns`` (S,) names, ``constellation``
+    (S,) codes (GPS 0, Galileo 1), ``prn_number`` (S,) ints, ``sat_healthy`` (S,) whole-file
+    health, ``n_records`` (S,), ``rejected_records`` (implausible orbits dropped), ``path``.
+    """
+
+    def __init__(self, table, path, max_age_s=DEFAULT_MAX_AGE_S):
+        self.path = str(path)
+        self.max_age_s = float(max_age_s)
+        plausible = ((table["sqrtA"] >= SQRT_A_RANGE[0]) & (table["sqrtA"] <= SQRT_A_RANGE[1])
+                     & (table["Eccentricity"] >= 0) & (table["Eccentricity"] <= E_MAX))
+        self.rejected_records = int(np.sum(~plausible))
+        t = {k: val[plausible] for k, val in table.items()}
+        prns = np.array(sorted(set(t["sv"])))
+        self.prns = prns
+        self.constellation = np.array([SYSTEM_CODES[p[0]] for p in prns], np.int32)
+        self.prn_number = np.array([int(p[1:]) for p in prns], np.int32)
+        s_of = {p: k for k, p in enumerate(prns)}
+        s_idx = np.array([s_of[p] for p in t["sv"]], np.int64)
+        counts = np.bincount(s_idx, minlength=prns.size)
+        self.n_records = counts
+        r_max = int(counts.max())
+        # records of each satellite sorted by t_oe, padded to r_max
+        order = np.lexsort((t["toe_s"], s_idx))
+        s_sorted = s_idx[order]
+        first = np.searchsorted(s_sorted, np.arange(prns.size))
+        r_idx = np.arange(order.size) - first[s_sorted]
+        healthy = t["health"] == 0
+        self.sat_healthy = np.bincount(s_idx, weights=healthy, minlength=prns.size) > 0.5 * counts
+
+        def pad(x, fill=0.0):
+            out = np.full((prns.size, r_max), fill, np.float64)
+            out[s_sorted, r_idx] = x[order]
+            return out
+
+        toe = pad(t["toe_s"], np.inf)
+        ok = pad(healthy.astype(float)) > 0
+        present = np.isfinite(toe)
+        # sorted t_oe of the usable (healthy) and of the unhealthy records, +inf padded
+        self._toe_healthy = np.sort(np.where(ok & present, toe, np.inf), axis=1)
+        self._toe_unhealthy = np.sort(np.where(~ok & present, toe, np.inf), axis=1)
+        # the healthy records in the same sorted order as _toe_healthy
+        perm = np.argsort(np.where(ok & present, toe, np.inf), axis=1, kind="stable")
+        take = lambda x: np.take_along_axis(x, perm, 1)  # noqa: E731
+        gal = (self.constellation == GALILEO)[:, None]
+        toe_h = take(np.where(present, toe, 0.0))
+        self._params = {
+            "toe_s": toe_h,
+            "toe_tow_s": toe_h - gpstime.SECONDS_PER_WEEK * np.floor(
+                toe_h / gpstime.SECONDS_PER_WEEK),
+            "toc_s": take(pad(t["toc_s"])),
+            "af0": take(pad(t["SVclockBias"])), "af1": take(pad(t["SVclockDrift"])),
+            "af2": take(pad(t["SVclockDriftRate"])),
+            "sqrt_a": take(pad(t["sqrtA"], 5153.0)), "e": take(pad(t["Eccentricity"])),
+            "i0": take(pad(t["Io"])), "idot": take(pad(t["IDOT"])),
+            "omega0": take(pad(t["Omega0"])), "omegadot": take(pad(t["OmegaDot"])),
+            "omega": take(pad(t["omega"])), "m0": take(pad(t["M0"])),
+            "delta_n": take(pad(t["DeltaN"])), "cuc": take(pad(t["Cuc"])),
+            "cus": take(pad(t["Cus"])), "crc": take(pad(t["Crc"])), "crs": take(pad(t["Crs"])),
+            "cic": take(pad(t["Cic"])), "cis": take(pad(t["Cis"])),
+            "mu": np.where(gal, MU_GAL_M3_S2, MU_GPS_M3_S2) * np.ones((1, r_max)),
+            "f_rel": np.where(gal, F_GAL_S_SQRT_M, F_GPS_S_SQRT_M) * np.ones((1, r_max)),
+        }
+        self._device = None
+
+    def __repr__(self):
+        n = {SYSTEM_NAMES[c]: int(np.sum(self.constellation == c)) for c in (GPS, GALILEO)}
+        return (f"Ephemeris({Path(self.path).name}: {n}, {int(self.n_records.sum())} records, "
+                f"unhealthy {list(self.prns[~self.sat_healthy])})")
+
+    @property
+    def record_span_s(self):
+        """(first, last) t_oe over the file, GPS seconds."""
+        t = self._toe_healthy[np.isfinite(self._toe_healthy)]
+        return float(t.min()), float(t.max())
+
+    def _select(self, prns):
+        if prns is None:
+            return np.arange(self.prns.size)
+        prns = [str(p) for p in np.atleast_1d(prns)]
+        missing = [p for p in prns if p not in set(self.prns)]
+        if missing:
+            raise ValueError(f"prns {missing} are not in {self.path}; available: "
+                             f"{', '.join(self.prns)}")
+        where = {p: k for k, p in enumerate(self.prns)}
+        return np.array([where[p] for p in prns])
+
+    def _arrays(self):
+        if self._device is None:
+            self._device = (
+                {k: jnp.asarray(v) for k, v in self._params.items()},
+                jnp.asarray(self._toe_healthy), jnp.asarray(self._toe_unhealthy),
+                jnp.asarray(self.sat_healthy))
+        return self._device
+
+    def sat_state(self, t_gps_s, prns=None, max_age_s=None) -> SatState:
+        """Positions, clocks, validity and record age at GPS times ``t_gps_s`` (T,)."""
+        idx = self._select(prns)
+        params, toe_h, toe_u, sat_ok = self._arrays()
+        if prns is not None:
+            params = {k: v[idx] for k, v in params.items()}
+            toe_h, toe_u, sat_ok = toe_h[idx], toe_u[idx], sat_ok[idx]
+        t = jnp.atleast_1d(jnp.asarray(t_gps_s, jnp.float64))
+        age = self.max_age_s if max_age_s is None else float(max_age_s)
+        ecef, clock, valid, age_s = _propagate(params, toe_h, toe_u, sat_ok, t, age)
+        return SatState(ecef, clock, valid, age_s, self.prns[idx])
+
+    def sat_position_ecef(self, t_gps_s, prns=None):
+        """``(ecef (T, S, 3) metres, valid (T, S), prns (S,))`` at GPS times ``t_gps_s`` (T,).
+
+        Positions are in the ECEF frame at time t (no light-time or Sagnac correction: see
+        ``geometry.frames.earth_rotation_correction``). Invalid entries hold 0, never NaN.
+        """
+        s = self.sat_state(t_gps_s, prns)
+        return s.ecef_m, s.valid, s.prns
+
+
+def _nearest(sorted_toe, t):
+    """Index into ``sorted_toe`` (R,) (+inf padded) of the value nearest each t (T,), and the
+    distance (inf if the row is empty)."""
+    k = jnp.searchsorted(sorted_toe, t)
+    lo = jnp.clip(k - 1, 0, sorted_toe.shape[0] - 1)
+    hi = jnp.clip(k, 0, sorted_toe.shape[0] - 1)
+    d_lo = jnp.abs(t - sorted_toe[lo])
+    d_hi = jnp.abs(sorted_toe[hi] - t)
+    d_lo = jnp.where(jnp.isfinite(sorted_toe[lo]), d_lo, jnp.inf)
+    d_hi = jnp.where(jnp.isfinite(sorted_toe[hi]), d_hi, jnp.inf)
+    pick_hi = d_hi < d_lo
+    return jnp.where(pick_hi, hi, lo), jnp.minimum(d_lo, d_hi)
+
+
+@jax.jit
+def _propagate(params, toe_healthy, toe_unhealthy, sat_ok, t, max_age_s):
+    # (S, T) record choice per satellite
+    idx, dist = jax.vmap(_nearest, in_axes=(0, None))(toe_healthy, t)
+    _, dist_bad = jax.vmap(_nearest, in_axes=(0, None))(toe_unhealthy, t)
+    valid = sat_ok[:, None] & (dist <= max_age_s) & ~(dist_bad < dist)
+    g = {k: jnp.take_along_axis(v, idx, axis=1).T for k, v in params.items()}  # (T, S)
+    tt = t[:, None]
+    el = OrbitElements(
+        toe_s=g["toe_s"], toe_tow_s=g["toe_tow_s"], sqrt_a=g["sqrt_a"], e=g["e"],
+        i0_rad=g["i0"], idot_rad_s=g["idot"], omega0_rad=g["omega0"],
+        omegadot_rad_s=g["omegadot"], omega_rad=g["omega"], m0_rad=g["m0"],
+        delta_n_rad_s=g["delta_n"], cuc_rad=g["cuc"], cus_rad=g["cus"], crc_m=g["crc"],
+        crs_m=g["crs"], cic_rad=g["cic"], cis_rad=g["cis"], mu_m3_s2=g["mu"])
+    # a far t_k on padding/invalid entries would only waste precision: clamp it
+    t_eval = jnp.where(valid.T, tt, g["toe_s"])
+    ecef, ecc = orbit_ecef(el, t_eval)
+    clock = (clock_polynomial_s(g["af0"], g["af1"], g["af2"], g["toc_s"], t_eval)
+             + relativistic_clock_s(g["f_rel"], g["e"], g["sqrt_a"], ecc))
+    v = valid.T
+    return (jnp.where(v[..., None], ecef, 0.0), jnp.where(v, clock, 0.0), v,
+            jnp.where(v, tt - g["toe_s"], 0.0))
+
+
+def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S) -> Ephemeris:
+    """Broadcast ephemerides of a RINEX 2 (GPS) or RINEX 3 navigation file (plain or .gz).
+
+    Args:
+      path: the file.
+      systems: RINEX system letters to keep ('G' GPS, 'E' Galileo).
+      max_age_s: largest |t - t_oe| of a usable record (default 4 h).
+
+    Raises:
+      NavigationFileError (a ValueError) naming the file and line when the file is missing,
+      malformed or truncated.
+    """
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "
+                                  "RINEX 2/3 navigation file (plain or .gz)")
+    bad = [s for s in systems if s not in SYSTEM_CODES]
+    if bad:
+        raise ValueError(f"systems must be among 'G' (GPS) and 'E' (Galileo), got {bad}")
+    st = os.stat(p)
+    table = _parsed_records(str(p.resolve()), st.st_mtime_ns, st.st_size, tuple(systems))
+    return Ephemeris(table, p, max_age_s)
