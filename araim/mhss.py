@@ -47,6 +47,8 @@ PL_TOLERANCE_M = 1e-3
 #: 1e-3 m, 7 give 1e-10 m; 10 leave a margin. Non-convergence is reported (NOT_CONVERGED).
 PL_ITERATIONS = 10
 _SQRT1_2 = 0.7071067811865476
+#: sigma_ss below this fraction of sigma^(0) is rounding noise: the mode's separation is zero
+ZERO_SEPARATION_RTOL = 1e-9
 
 
 def q_function(x):
@@ -144,6 +146,10 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
     d = s_pos - s_pos[:1]
     sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[None, None], axis=2))
+    # A mode whose fault-tolerant solution equals the all-in-view one (a lone SOP in its own
+    # constellation, Theorem 1) has S^(i) = S^(0) up to rounding: make its separation and
+    # threshold exactly 0 so that tau = 0 (DESIGN.md) instead of a ratio of rounding noise.
+    sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma[:1], 0.0, sigma_ss)
 
     n_modes = jnp.sum(monitored, axis=0)
     nf = jnp.maximum(n_modes, 1).astype(g.dtype)

@@ -22,6 +22,8 @@ class Status(enum.IntEnum):
     #: the mode order allowed, or fault-tolerant subsets that are singular) exceeds P_thresh
     #: (seed 004 eq. 8)
     UNMONITORED_RISK = 5
+    #: a fault was detected and no candidate subset passed its own test (``detect_and_exclude``)
+    EXCLUSION_FAILED = 6
 
 
 def describe(code: int) -> str:
