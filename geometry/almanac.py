@@ -1,0 +1,250 @@
+"""GPS/Galileo almanacs: YUMA and SEM readers and their propagation.
+
+An almanac holds one reduced Keplerian record per satellite (IS-GPS-200 20.3.3.5.1.2, Table
+20-VI): e, t_oa, i (SEM: delta_i from i_0 = 0.30 semicircles), Omega-dot, sqrt(A), Omega_0
+(the longitude of the ascending node at the weekly epoch), omega, M_0, a_f0, a_f1 and a health
+word. Propagation is the ephemeris algorithm with the harmonic terms, delta_n and IDOT zero
+(IS-GPS-200 20.3.3.5.2.3), through ``geometry.kepler.orbit_ecef``; the almanac clock is
+a_f0 + a_f1 t_k.
+
+YUMA is the text format of the US Coast Guard NAVCEN (keys ``ID:``, ``Health:``, ... in radians
+and seconds); SEM is NAVCEN's column format (angles in semicircles). Week numbers: YUMA and SEM
+files of GPS usually write the week modulo 1024; they are taken literally unless
+``week_reference_t_gps_s`` is given, in which case the full week nearest to that time is used
+(``geometry.gpstime.resolve_week``). MAAST's ``almmops.txt`` (week 703: June 1993) is already
+literal.
+"""
+
+import re
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from geometry import gpstime
+from geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
+from geometry.kepler import (
+    GPS_PI,
+    MU_GAL_M3_S2,
+    MU_GPS_M3_S2,
+    OrbitElements,
+    orbit_ecef,
+)
+
+
+class AlmanacFileError(ValueError):
+    """A malformed almanac file: names the file, the line and the field."""
+
+
+class AlmanacRecords(NamedTuple):
+    """Per-satellite almanac elements, each ``(S,)``, SI units and radians."""
+
+    prn: np.ndarray  # int
+    health: np.ndarray  # int
+    e: np.ndarray
+    toa_s: np.ndarray  # absolute GPS seconds of t_oa
+    toa_tow_s: np.ndarray  # t_oa within its week
+    i_rad: np.ndarray
+    omegadot_rad_s: np.ndarray
+    sqrt_a: np.ndarray
+    omega0_rad: np.ndarray
+    omega_rad: np.ndarray
+    m0_rad: np.ndarray
+    af0_s: np.ndarray
+    af1_s_s: np.ndarray
+
+
+class Almanac:
+    """Satellites of an almanac or a nominal constellation (one Keplerian record each).
+
+    ``sat_position_ecef(t_gps_s, prns=None)`` has the signature of ``Ephemeris``'s: it returns
+    ``(ecef (T, S, 3), valid (T, S), prns (S,))`` where valid is the health word == 0.
+    """
+
+    def __init__(self, records: AlmanacRecords, system: int, name: str):
+        self.records = records
+        self.system = int(system)
+        self.name = name
+        letter = "G" if system == GPS else "E"
+        self.prns = np.array([f"{letter}{int(p):02d}" for p in records.prn])
+        self.prn_number = np.asarray(records.prn, np.int32)
+        self.constellation = np.full(self.prns.size, system, np.int32)
+        self.sat_healthy = np.asarray(records.health) == 0
+        mu = MU_GAL_M3_S2 if system == GALILEO else MU_GPS_M3_S2
+        r = records
+        z = np.zeros(self.prns.size)
+        self._elements = OrbitElements(
+            toe_s=r.toa_s, toe_tow_s=r.toa_tow_s, sqrt_a=r.sqrt_a, e=r.e, i0_rad=r.i_rad,
+            idot_rad_s=z, omega0_rad=r.omega0_rad, omegadot_rad_s=r.omegadot_rad_s,
+            omega_rad=r.omega_rad, m0_rad=r.m0_rad, delta_n_rad_s=z, cuc_rad=z, cus_rad=z,
+            crc_m=z, crs_m=z, cic_rad=z, cis_rad=z, mu_m3_s2=np.full(z.shape, mu))
+
+    def __repr__(self):
+        return (f"Almanac({self.name}: {self.prns.size} {SYSTEM_NAMES[self.system]} satellites, "
+                f"{int(np.sum(~self.sat_healthy))} unhealthy)")
+
+    def _select(self, prns):
+        if prns is None:
+            return np.arange(self.prns.size)
+        where = {p: k for k, p in enumerate(self.prns)}
+        missing = [str(p) for p in np.atleast_1d(prns) if str(p) not in where]
+        if missing:
+            raise ValueError(f"prns {missing} are not in {self.name}; available: "
+                             f"{', '.join(self.prns)}")
+        return np.array([where[str(p)] for p in np.atleast_1d(prns)])
+
+    def sat_position_ecef(self, t_gps_s, prns=None):
+        idx = self._select(prns)
+        el = OrbitElements(*(jnp.asarray(np.asarray(x)[idx]) for x in self._elements))
+        t = jnp.atleast_1d(jnp.asarray(t_gps_s, jnp.float64))
+        ecef = _almanac_ecef(el, t)
+        valid = jnp.broadcast_to(jnp.asarray(self.sat_healthy[idx]), ecef.shape[:-1])
+        return jnp.where(valid[..., None], ecef, 0.0), valid, self.prns[idx]
+
+    def clock_s(self, t_gps_s):
+        """Almanac clock a_f0 + a_f1 (t - t_oa), ``(T, S)`` seconds."""
+        t = np.atleast_1d(np.asarray(t_gps_s, np.float64))[:, None]
+        return self.records.af0_s + self.records.af1_s_s * (t - self.records.toa_s)
+
+
+@jax.jit
+def _almanac_ecef(el, t):
+    el_b = OrbitElements(*(x[None, :] for x in el))
+    ecef, _ = orbit_ecef(el_b, t[:, None])
+    return ecef
+
+
+def _records(rows, system, week_reference_t_gps_s):
+    arr = {k: np.array([r[k] for r in rows], np.float64) for k in rows[0]}
+    week = arr["week"].astype(np.int64)
+    if week_reference_t_gps_s is not None:
+        week = gpstime.resolve_week(week, week_reference_t_gps_s)
+    return AlmanacRecords(
+        prn=arr["prn"].astype(np.int32), health=arr["health"].astype(np.int64), e=arr["e"],
+        toa_s=gpstime.from_week_tow(week, arr["toa"]), toa_tow_s=arr["toa"], i_rad=arr["i"],
+        omegadot_rad_s=arr["omegadot"], sqrt_a=arr["sqrt_a"], omega0_rad=arr["omega0"],
+        omega_rad=arr["omega"], m0_rad=arr["m0"], af0_s=arr["af0"], af1_s_s=arr["af1"])
+
+
+_YUMA_KEYS = {
+    "id": "prn", "health": "health", "eccentricity": "e", "time of applicability": "toa",
+    "orbital inclination": "i", "rate of right ascen": "omegadot", "sqrt(a)": "sqrt_a",
+    "right ascen at week": "omega0", "right ascen at toa": "omega0",
+    "argument of perigee": "omega", "mean anom": "m0", "af0": "af0", "af1": "af1",
+    "week": "week",
+}
+
+
+def _yuma_key(label):
+    label = label.strip().lower()
+    for k, v in _YUMA_KEYS.items():
+        if label.startswith(k):
+            return v
+    return None
+
+
+def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
+    """Read a YUMA almanac. ``system``: 'G' (GPS) or 'E' (Galileo, e.g. MAAST's ED-259 file).
+
+    The satellite number is taken from the block header ('PRN-01', 'SVID- 1') when present,
+    else from ``ID:``. Health: the 3-digit health field (0 = healthy).
+    """
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise AlmanacFileError(f"almanac file {str(path)!r} not found")
+    if system not in ("G", "E"):
+        raise ValueError(f"system must be 'G' or 'E', got {system!r}")
+    rows, cur = [], None
+    need = set(_YUMA_KEYS.values())
+    lines = p.read_text(encoding="ascii", errors="replace").splitlines()
+
+    def close(lineno):
+        if cur is None:
+            return
+        missing = sorted(need - set(cur))
+        if missing:
+            raise AlmanacFileError(f"{p}: line {lineno}: the almanac block starting at line "
+                                   f"{cur['_line']} lacks {', '.join(missing)}; the file is "
+                                   "truncated or not YUMA")
+        cur.pop("_line")
+        header_prn = cur.pop("_header_prn")
+        if header_prn is not None:
+            cur["prn"] = header_prn
+        rows.append(cur)
+
+    for k, line in enumerate(lines, start=1):
+        if line.startswith("****"):
+            close(k)
+            m = re.search(r"(?:PRN|SVID)-\s*(\d+)", line)
+            cur = {"_line": k, "_header_prn": int(m.group(1)) if m else None}
+            continue
+        if ":" not in line or cur is None:
+            if line.strip() and cur is None:
+                raise AlmanacFileError(f"{p}: line {k}: text before the first '****' block "
+                                       "header; not a YUMA almanac")
+            continue
+        label, _, value = line.partition(":")
+        key = _yuma_key(label)
+        if key is None:
+            continue
+        try:
+            cur[key] = float(value.strip().replace("D", "E"))
+        except ValueError:
+            raise AlmanacFileError(f"{p}: line {k}: cannot read {label.strip()!r} value "
+                                   f"{value.strip()!r} as a number") from None
+    close(len(lines))
+    if not rows:
+        raise AlmanacFileError(f"{p}: no almanac blocks ('******** Week ... almanac for "
+                               "PRN-nn ********'); not a YUMA almanac")
+    return Almanac(_records(rows, system, week_reference_t_gps_s),
+                   GPS if system == "G" else GALILEO, p.name)
+
+
+def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
+    """Read a SEM almanac (NAVCEN ``.al3``): angles in semicircles, inclination as delta_i
+    from 0.30 semicircles (GPS). Layout: count and title; week and t_oa; then per satellite
+    PRN, SVN, URA, (e, delta_i, Omega-dot), (sqrt A, Omega_0, omega), (M_0, a_f0, a_f1),
+    health, configuration (8 lines), separated by blank lines."""
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise AlmanacFileError(f"almanac file {str(path)!r} not found")
+    lines = p.read_text(encoding="ascii", errors="replace").splitlines()
+    tokens = []  # (line number, [numbers]) of non-blank lines
+    for k, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            nums = [float(v.replace("D", "E")) for v in line.split()[:3]]
+        except ValueError:
+            if k == 1:  # title text after the count
+                nums = [float(line.split()[0])]
+            else:
+                raise AlmanacFileError(f"{p}: line {k}: cannot read {line.strip()!r} as "
+                                       "numbers; not a SEM almanac") from None
+        tokens.append((k, nums))
+    if len(tokens) < 2:
+        raise AlmanacFileError(f"{p}: line {len(lines)}: no SEM header (count, week and t_oa)")
+    n_sats = int(tokens[0][1][0])
+    week, toa = tokens[1][1][0], tokens[1][1][1]
+    body = tokens[2:]
+    if len(body) < 8 * n_sats:
+        raise AlmanacFileError(
+            f"{p}: line {len(lines)}: {n_sats} satellites announced, 8 lines each, but only "
+            f"{len(body)} lines follow; the file is truncated")
+    sc = GPS_PI  # semicircles -> radians (IS-GPS-200 20.3.3.5.1.2)
+    rows = []
+    for s in range(n_sats):
+        b = [nums for _, nums in body[8 * s: 8 * s + 8]]
+        k0 = body[8 * s][0]
+        if len(b[3]) < 3 or len(b[4]) < 3 or len(b[5]) < 3:
+            raise AlmanacFileError(f"{p}: line {k0 + 3}: expected three numbers per orbit line "
+                                   "of the satellite record starting here")
+        rows.append({
+            "prn": b[0][0], "health": b[6][0], "e": b[3][0], "toa": toa,
+            "i": (0.30 + b[3][1]) * sc, "omegadot": b[3][2] * sc, "sqrt_a": b[4][0],
+            "omega0": b[4][1] * sc, "omega": b[4][2] * sc, "m0": b[5][0] * sc,
+            "af0": b[5][1], "af1": b[5][2], "week": week})
+    return Almanac(_records(rows, system, week_reference_t_gps_s),
+                   GPS if system == "G" else GALILEO, p.name)

@@ -1,0 +1,170 @@
+"""The sky of a receiver: azimuth, elevation and validity of every satellite at every epoch.
+
+``geometry.sky(receiver_ecef_m, t_gps_s, source=..., mask_deg=...)`` batches over receivers
+(any leading shape) and epochs and returns padded arrays ``(..., T, S)`` over a fixed satellite
+list with a ``valid`` mask (healthy ephemeris within its validity window AND elevation >=
+mask), ready for ``geometry.geometry_rows(az, el)`` and ``araim``. Constellation codes are
+fixed: GPS 0, Galileo 1 (DESIGN.md); studies append SOP constellations after them.
+
+Sources: ``"nominal"`` (built-in GPS 24-slot + Galileo Walker 24/3/1, the default sky),
+``"nominal-gps"``, ``"nominal-galileo"``, a path to a RINEX 2/3 navigation file or a YUMA
+almanac (``.txt``/``.yuma``/``.alm``) or a SEM almanac (``.al3``/``.sem``), or an already
+loaded ``Ephemeris``/``Almanac`` (or a list of them).
+
+Positions are in the ECEF frame at the epoch t (geometry: the Sagnac rotation during the
+~70 ms signal flight moves a direction by ~1.4 arcsec and is left out).
+"""
+
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from geometry.almanac import Almanac, read_sem, read_yuma
+from geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
+from geometry.frames import ecef_to_geodetic, enu_rotation
+from geometry.nominal import galileo_walker, gps_24_slot
+
+CONSTELLATION_CODES = {"gps": GPS, "galileo": GALILEO}
+
+
+class Sky(NamedTuple):
+    az_rad: jax.Array  # (..., T, S) clockwise from north, [0, 2 pi)
+    el_rad: jax.Array  # (..., T, S)
+    range_m: jax.Array  # (..., T, S)
+    valid: jax.Array  # (..., T, S) usable ephemeris and el >= mask
+    prn: np.ndarray  # (S,) satellite numbers
+    constellation: np.ndarray  # (S,) GPS 0, Galileo 1
+    sv: np.ndarray  # (S,) names 'G05', 'E11'
+    t_gps_s: np.ndarray  # (T,)
+    source: str  # what was used
+
+
+def _load_file(path: Path, constellations):
+    name = path.name.lower()
+    if name.endswith((".al3", ".sem")):
+        return [read_sem(path)]
+    if name.endswith((".yuma", ".alm")) or (name.endswith(".txt") and _looks_yuma(path)):
+        return [read_yuma(path, system="E" if constellations == {GALILEO} else "G")]
+    systems = tuple(s for s, c in (("G", GPS), ("E", GALILEO)) if c in constellations)
+    return [load_navigation(path, systems=systems)]
+
+
+def _looks_yuma(path: Path) -> bool:
+    with open(path, encoding="ascii", errors="replace") as f:
+        return f.read(200).lstrip().startswith("****")
+
+
+def resolve_source(source, constellations=("gps", "galileo")):
+    """The orbit objects of a ``source`` (see the module docstring) and a description."""
+    bad = [c for c in constellations if c not in CONSTELLATION_CODES]
+    if bad or not constellations:
+        raise ValueError(f"constellations must be a non-empty subset of ('gps', 'galileo'), got "
+                         f"{tuple(constellations)!r}")
+    codes = {CONSTELLATION_CODES[c] for c in constellations}
+    if isinstance(source, Ephemeris | Almanac):
+        objs = [source]
+    elif isinstance(source, list | tuple) and source and all(
+            isinstance(s, Ephemeris | Almanac) for s in source):
+        objs = list(source)
+    elif isinstance(source, str) and source.startswith("nominal"):
+        table = {"nominal": (gps_24_slot, galileo_walker), "nominal-gps": (gps_24_slot,),
+                 "nominal-galileo": (galileo_walker,)}
+        if source not in table:
+            raise ValueError(f"source {source!r} unknown; use 'nominal', 'nominal-gps', "
+                             "'nominal-galileo' or a navigation/almanac file path")
+        objs = [f() for f in table[source]]
+    elif isinstance(source, str | Path):
+        p = Path(source).expanduser()
+        if not p.is_file():
+            raise ValueError(f"sky source {str(source)!r} is neither 'nominal[-gps|-galileo]' "
+                             "nor an existing navigation or almanac file")
+        objs = _load_file(p, codes)
+    else:
+        raise ValueError(f"sky source must be 'nominal', a file path, an Ephemeris or an "
+                         f"Almanac, got {type(source).__name__}")
+    desc = "; ".join(repr(o) for o in objs)
+    return objs, codes, desc
+
+
+def satellites(source, t_gps_s, constellations=("gps", "galileo")):
+    """ECEF positions ``(T, S, 3)``, usable mask ``(T, S)`` and the satellite labels of a source,
+    restricted to the requested constellations."""
+    objs, codes, desc = resolve_source(source, constellations)
+    t = np.atleast_1d(np.asarray(t_gps_s, np.float64))
+    ecef, valid, prn, cons, sv = [], [], [], [], []
+    for o in objs:
+        keep = np.isin(o.constellation, list(codes))
+        if not np.any(keep):
+            continue
+        e, v, names = o.sat_position_ecef(t, prns=o.prns[keep])
+        ecef.append(e)
+        valid.append(v)
+        prn.append(o.prn_number[keep])
+        cons.append(o.constellation[keep])
+        sv.append(names)
+    if not ecef:
+        raise ValueError(f"the sky source ({desc}) holds no satellite of {tuple(constellations)}")
+    return (jnp.concatenate(ecef, 1), jnp.concatenate(valid, 1), np.concatenate(prn),
+            np.concatenate(cons), np.concatenate(sv), desc)
+
+
+@jax.jit
+def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
+    """Az, el, range and validity of satellites ``(T, S, 3)`` from receivers ``(..., 3)``.
+
+    Returns arrays ``(..., T, S)``; entries of unusable satellites hold az = el = range = 0.
+    """
+    rx = jnp.asarray(receiver_ecef_m, jnp.float64)
+    lat, lon, _ = ecef_to_geodetic(rx)
+    r = enu_rotation(lat, lon)  # (..., 3, 3)
+    # line of sight projected on east, north, up: R (sat - rx), as matrix products over T x S
+    proj = jnp.einsum("...ik,tsk->...tsi", r, sat_ecef_m)
+    proj = proj - jnp.einsum("...ik,...k->...i", r, rx)[..., None, None, :]
+    e, n, u = proj[..., 0], proj[..., 1], proj[..., 2]
+    horiz = jnp.hypot(e, n)
+    az = jnp.mod(jnp.arctan2(e, n), 2.0 * jnp.pi)
+    el = jnp.arctan2(u, horiz)
+    rng = jnp.hypot(horiz, u)
+    usable = jnp.broadcast_to(sat_valid, el.shape)
+    valid = usable & (el >= mask_rad)
+    zero = jnp.zeros_like(el)
+    return (jnp.where(usable, az, zero), jnp.where(usable, el, zero),
+            jnp.where(usable, rng, zero), valid)
+
+
+def sky(receiver_ecef_m, t_gps_s, source="nominal", mask_deg=5.0,
+        constellations=("gps", "galileo")) -> Sky:
+    """Azimuth/elevation of every satellite of ``source`` at GPS times ``t_gps_s`` (T,), seen
+    from receivers ``receiver_ecef_m`` ``(..., 3)`` (metres, WGS-84 ECEF).
+
+    Args:
+      receiver_ecef_m: ``(3,)`` or ``(..., 3)`` receiver positions.
+      t_gps_s: epochs, GPS seconds (``geometry.gpstime``), shape ``(T,)`` or scalar.
+      source: 'nominal' (default: built-in GPS 24-slot + Galileo Walker), 'nominal-gps',
+        'nominal-galileo', a RINEX navigation / YUMA / SEM file, or loaded orbit objects.
+      mask_deg: elevation mask in degrees, [0, 90). Default 5 deg (ARAIM practice).
+      constellations: which of ('gps', 'galileo') to keep.
+
+    Returns:
+      ``Sky`` with ``(..., T, S)`` arrays; ``valid`` marks the satellites in view and usable.
+    """
+    try:
+        mask = float(mask_deg)
+    except (TypeError, ValueError):
+        raise ValueError(f"mask_deg must be a number in [0, 90), got {mask_deg!r}") from None
+    if not (0.0 <= mask < 90.0):
+        raise ValueError(f"mask_deg must be a number in [0, 90), got {mask_deg!r}")
+    rx = np.asarray(receiver_ecef_m, np.float64)
+    if rx.shape[-1:] != (3,) or not np.all(np.isfinite(rx)):
+        raise ValueError(f"receiver_ecef_m must be finite with last axis 3 (x, y, z metres), got "
+                         f"shape {rx.shape}")
+    if np.any(np.linalg.norm(rx, axis=-1) < 6.0e6):
+        raise ValueError("receiver_ecef_m must be ECEF metres near the Earth's surface (|r| >= "
+                         "6,000 km); convert latitude/longitude with geometry.geodetic_to_ecef")
+    t = np.atleast_1d(np.asarray(t_gps_s, np.float64))
+    ecef, valid, prn, cons, sv, desc = satellites(source, t, tuple(constellations))
+    az, el, rng, v = look_angles(rx, ecef, valid, np.deg2rad(mask))
+    return Sky(az, el, rng, v, prn, cons, sv, t, desc)
