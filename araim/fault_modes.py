@@ -48,7 +48,7 @@ so a batch with different constellation labels shares one compiled kernel.
 """
 
 import itertools
-from functools import lru_cache
+from functools import cache
 from typing import NamedTuple
 
 import jax
@@ -72,7 +72,7 @@ class ModeTemplate(NamedTuple):
     order: np.ndarray
 
 
-@lru_cache(maxsize=None)
+@cache
 def mode_template(n_sources: int, n_constellations: int, max_order: int) -> ModeTemplate:
     """Candidate modes, ordered by order, then resolved sources, then whole sets."""
     L, C = n_sources, n_constellations
@@ -138,7 +138,8 @@ def group_probabilities(valid, constellation, p_sat, p_const) -> GroupProbabilit
     p_none = (1.0 - pc) * p0
     p_fault = jnp.where(present, pc + (1.0 - pc) * (p1 + p2), 0.0)
     p_whole = jnp.where(present, pc + (1.0 - pc) * jnp.where(n_sources == 1, p1 + p2, p2), 0.0)
-    # P_single_l = (1 - P_const) P_s,l prod_{l' != l} (1 - P_s,l') = (1 - P_const) p0 P_s / (1 - P_s)
+    # P_single_l = (1 - P_const) P_s,l prod_{l' != l} (1 - P_s,l')
+    #            = (1 - P_const) p0 P_s,l / (1 - P_s,l)
     own = jnp.sum(jnp.where(member, ((1.0 - pc) * p0)[None], 0.0), axis=1)
     big = jnp.any(member & (n_sources >= 2)[None], axis=1)
     ps = jnp.where(valid, p_sat, 0.0)

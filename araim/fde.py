@@ -23,8 +23,14 @@ import jax.numpy as jnp
 from araim import linalg
 from araim.budget import IntegrityBudget
 from araim.fault_modes import to_batch_first, to_batch_last
-from araim.mhss import (MHSSResult, _batch_last_inputs, _pls_from_projection, _project,
-                        prepare_inputs, required_order)
+from araim.mhss import (
+    MHSSResult,
+    _batch_last_inputs,
+    _pls_from_projection,
+    _project,
+    prepare_inputs,
+    required_order,
+)
 from araim.status import Status
 from araim.validate import check_int
 

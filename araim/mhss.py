@@ -94,11 +94,96 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
+def _normal(cols, w, axis):
+    """Upper-and-lower nested list of sum_l w c_a c_b over ``axis`` (symmetric, each once)."""
+    k = len(cols)
+    wc = [w * c for c in cols]
+    n = [[None] * k for _ in range(k)]
+    for i in range(k):
+        for j in range(i + 1):
+            n[i][j] = n[j][i] = jnp.sum(wc[i] * cols[j], axis=axis)
+    return n
+
+
+def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0):
+    """Fault-tolerant solutions of arbitrary exclusion sets, by Cholesky of each normal matrix.
+
+    keep (M, L, B); cols: 3 + C arrays (1, L, B); s0: (3, L, B) all-in-view position rows, or
+    None to use mode 0 of ``keep`` as the all-in-view. Returns s_pos (M, 3, L, B), var_pos
+    (M, 3, B), bias (M, 3, B), sigma_ss (M, 3, B), nonsingular (M, B).
+    """
+    n_states = len(cols)
+    C = n_states - 3
+    w = jnp.where(keep, w_int[None], 0.0)
+    n = _normal(cols, w, axis=1)  # (M, B) entries
+    kept_c = jnp.any(keep[:, :, None, :] & member[None], axis=1)  # (M, C, B)
+    for c in range(C):  # drop the clock of a constellation with no kept source
+        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
+    lower, nonsingular = linalg.cholesky(n)
+    zero = jnp.zeros_like(n[0][0])
+    y = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0)
+                                       for j in range(n_states)]) for q in range(3)]
+    # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}
+    s_pos = jnp.stack([w * sum(y[q][a][:, None, :] * cols[a] for a in range(n_states))
+                       for q in range(3)], axis=1)  # (M, 3, L, B)
+    s_pos = jnp.where(nonsingular[:, None, None, :], s_pos, 0.0)
+    var_pos = jnp.stack([y[q][q] for q in range(3)], axis=1)  # (M, 3, B)
+    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
+    d = s_pos - (s_pos[:1] if s0 is None else s0[None])
+    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[None, None], axis=2))
+    return s_pos, var_pos, bias, sigma_ss, nonsingular
+
+
+#: a single-source exclusion is singular when 1 - w_l h_l^T N0^-1 h_l (the share of source l's
+#: information the others can replace; in [0, 1]) is below this
+SINGLE_REDUNDANCY_TOLERANCE = 1e-9
+
+
+def _single_modes(w_int, cols, b_nom, var_acc, lower0):
+    """All-in-view and every single-source exclusion from ONE Cholesky factor (rank-one
+    downdates, Sherman-Morrison; DESIGN.md performance notes).
+
+    With u_l = N0^-1 h_l, P_lm = h_l^T N0^-1 h_m and r_l = 1 - w_l P_ll:
+        N_l^-1 = N0^-1 + w_l u_l u_l^T / r_l
+        S^(l)_:,m = S^(0)_:,m + u_l c_lm (m != l), S^(l)_:,l = 0,   c_lm = w_l w_m P_lm / r_l
+        sigma_ss,q^(l)^2 = u_l,q^2 (sum_{m != l} c_lm^2 C_acc,m + w_l^2 C_acc,l)
+    Returns all-in-view (s0 (3, L, B), var0 (3, B)) and per single mode l (axis 0 of length L):
+    s_pos (L, 3, L, B), var_pos (L, 3, B), bias (L, 3, B), sigma_ss (L, 3, B), ok (L, B).
+    """
+    n_states = len(cols)
+    L = w_int.shape[0]
+    lower_l = [[None if e is None else e[None] for e in row] for row in lower0]
+    u = linalg.cholesky_solve(lower_l, [c[0] for c in cols])  # n arrays (L, B): N0^-1 h_l
+    zero = jnp.zeros_like(lower0[0][0])
+    e = [linalg.cholesky_solve(lower0, [zero + (1.0 if j == q else 0.0)
+                                        for j in range(n_states)]) for q in range(3)]
+    var0 = jnp.stack([e[q][q] for q in range(3)], axis=0)  # (3, B)
+    p = sum(cols[a][0][:, None, :] * u[a][None, :, :] for a in range(n_states))  # (L, L, B)
+    s0 = jnp.stack([w_int * u[q] for q in range(3)], axis=0)  # (3, L, B)
+    p_ll = jnp.diagonal(p, axis1=0, axis2=1).T  # (L, B)
+    r = 1.0 - w_int * p_ll
+    ok = r > SINGLE_REDUNDANCY_TOLERANCE
+    r_safe = jnp.where(ok, r, 1.0)
+    eye = jnp.eye(L, dtype=bool)[:, :, None]
+    c = jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :])  # c_lm
+    u_pos = jnp.stack(u[:3], axis=1)  # (L, 3, B): u_l,q
+    s_pos = s0[None] + u_pos[:, :, None, :] * c[:, None, :, :]  # (L, 3, L, B), m = l wrong
+    s_pos = jnp.where(eye[:, None], 0.0, s_pos)
+    s_pos = jnp.where(ok[:, None, None, :], s_pos, 0.0)
+    var_pos = var0[None] + u_pos**2 * (w_int / r_safe)[:, None, :]
+    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
+    spread = jnp.sum(c**2 * var_acc[None], axis=1) + w_int**2 * var_acc  # (L, B)
+    sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
+    return s0, var0, s_pos, var_pos, bias, sigma_ss, ok
+
+
 def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
-             max_order, all_in_view_weighting):
+             max_order, all_in_view_weighting, single_downdates=True):
     """Batch-last: g (L, 3, B); constellation, var_*, b_nom, p_sat, valid (L, B); p_const
-    (C, B)."""
+    (C, B). ``single_downdates`` computes the L single-source modes by rank-one downdates of
+    the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky."""
     C = p_const.shape[0]
+    L = valid.shape[0]
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
     g = jnp.where(valid[:, None, :], g, 0.0)
@@ -107,34 +192,51 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     var_int = jnp.where(valid, var_int, 0.0)
     b_nom = jnp.where(valid, b_nom, 0.0)
     member = valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None])
-
-    keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
-    w = jnp.where(keep, w_int[None], 0.0)
-    if all_in_view_weighting == "acc":
-        w_acc = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
-        w = w.at[0].set(w_acc)
     cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
     cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
-    n_states = 3 + C
-    wc = [w * c for c in cols]
-    n = [[None] * n_states for _ in range(n_states)]
-    for i in range(n_states):
-        for j in range(i + 1):
-            n[i][j] = n[j][i] = jnp.sum(wc[i] * cols[j], axis=1)  # (K, B)
-    kept_c = jnp.any(keep[:, :, None, :] & member[None], axis=1)  # (K, C, B)
-    for c in range(C):
-        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
-    lower, nonsingular = linalg.cholesky(n)
-    zero = jnp.zeros_like(n[0][0])
-    y = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0)
-                                       for j in range(n_states)]) for q in range(3)]
-    # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}
-    s_pos = jnp.stack([w * sum(y[q][a][:, None, :] * cols[a] for a in range(n_states))
-                       for q in range(3)], axis=1)  # (K, 3, L, B)
-    var_pos = jnp.stack([y[q][q] for q in range(3)], axis=1)  # (K, 3, B)
-    if all_in_view_weighting == "acc":
-        var_pos = var_pos.at[0].set(jnp.sum(s_pos[0] ** 2 * var_int[None], axis=1))
 
+    if single_downdates and all_in_view_weighting == "int":
+        n0 = _normal([c[0] for c in cols], w_int, axis=0)
+        present = jnp.any(member, axis=0)
+        for c in range(C):
+            n0[3 + c][3 + c] = n0[3 + c][3 + c] + jnp.where(present[c], 0.0, 1.0)
+        lower0, aiv_ok = linalg.cholesky(n0)
+        s0, var0, s1, v1, b1, ss1, ok1 = _single_modes(w_int, cols, b_nom, var_acc, lower0)
+        s0 = jnp.where(aiv_ok[None, None], s0, 0.0)
+        keep_rest = valid[None] & ~fm.excluded[L:]
+        sr, vr, br, ssr, okr = _generic_modes(keep_rest, w_int, cols, member, b_nom, var_acc,
+                                              s0)
+        b0 = jnp.sum(jnp.abs(s0) * b_nom[None], axis=1)
+        s_pos = jnp.concatenate([s0[None], s1, sr], axis=0)
+        var_pos = jnp.concatenate([var0[None], v1, vr], axis=0)
+        bias = jnp.concatenate([b0[None], b1, br], axis=0)
+        sigma_ss = jnp.concatenate([jnp.zeros_like(b0)[None], ss1, ssr], axis=0)
+        nonsingular = jnp.concatenate([aiv_ok[None], ok1 & aiv_ok[None], okr], axis=0)
+    else:
+        keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
+        s_pos, var_pos, bias, sigma_ss, nonsingular = _generic_modes(
+            keep, w_int, cols, member, b_nom, var_acc, None)
+        if all_in_view_weighting == "acc":
+            w_acc = linalg.inverse_variance_weights(
+                jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
+            s0, _, b0, _, ok0 = _generic_modes(
+                valid[None], w_acc, cols, member, b_nom, var_acc, None)
+            # seed 004 after eq. 5: S^(0) weighted by C_acc^-1; its integrity sigma is
+            # sqrt(S^(0) C_int S^(0)T)_qq
+            var0 = jnp.sum(s0[0] ** 2 * var_int[None], axis=1)
+            s_pos = s_pos.at[0].set(s0[0])
+            var_pos = var_pos.at[0].set(var0)
+            bias = bias.at[0].set(b0[0])
+            nonsingular = nonsingular.at[0].set(ok0[0])
+            sigma_ss = jnp.sqrt(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None], axis=2))
+            sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
+    return _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
+                   budget, g.dtype)
+
+
+def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc, budget,
+            dtype):
+    """Thresholds (eq. 12), priors, P_nm and status from the per-mode quantities."""
     false0 = jnp.zeros_like(fm.live[:1])
     live = jnp.concatenate([false0, fm.live], axis=0)
     prior_all = jnp.concatenate([jnp.zeros_like(fm.prior[:1]), fm.prior], axis=0)
@@ -143,16 +245,15 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     usable = monitored.at[0].set(aiv_ok)
     s_pos = jnp.where(usable[:, None, None, :], s_pos, 0.0)
     sigma = jnp.sqrt(jnp.where(usable[:, None, :], jnp.maximum(var_pos, 0.0), 1.0))
-    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
-    d = s_pos - s_pos[:1]
-    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[None, None], axis=2))
+    bias = jnp.where(usable[:, None, :], bias, 0.0)
+    sigma_ss = jnp.where(usable[:, None, :], sigma_ss, 0.0)
     # A mode whose fault-tolerant solution equals the all-in-view one (a lone SOP in its own
     # constellation, Theorem 1) has S^(i) = S^(0) up to rounding: make its separation and
     # threshold exactly 0 so that tau = 0 (DESIGN.md) instead of a ratio of rounding noise.
     sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma[:1], 0.0, sigma_ss)
 
     n_modes = jnp.sum(monitored, axis=0)
-    nf = jnp.maximum(n_modes, 1).astype(g.dtype)
+    nf = jnp.maximum(n_modes, 1).astype(dtype)
     k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
     k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
     k_fa = jnp.stack([k_h, k_h, k_v], axis=0)  # (3, B)

@@ -82,3 +82,118 @@ def bench_fig3(realizations=1_000_000):
     result = study.run(params, realizations, 0, None)
     return {"realizations": realizations, "wall_s": time.perf_counter() - t0,
             "share_el_star_0deg_pct": result.metrics["share_el_star_0deg_pct"]}
+
+
+def _load_tests_module(name):
+    path = Path(__file__).resolve().parent.parent / "tests" / f"{name}.py"
+    if not path.exists():
+        return None
+    spec = importlib.util.spec_from_file_location(f"oaraim_tests_{name}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_sop=1e-4):
+    """The issue-3 benchmark case: 9 GPS (5 deg mask, ADD error models, Table I) + 4 BPP SOPs in
+    one SOP constellation (sigma_URA^S = 3 m, P_s^S = 1e-4, P_const^S = 1e-4, b_nom 0)."""
+    import araim
+
+    k1, k2 = jax.random.split(jax.random.key(seed))
+    az, el = geometry.random_sky(k1, n_gps, np.deg2rad(5.0), (n,))
+    t = geometry.bpp_towers(k2, n_sop, 5.0, 3000.0, 0.0, 0.0, (n,))
+    g = geometry.geometry_rows(jnp.concatenate([az, t.az_rad], -1),
+                               jnp.concatenate([el, t.el_rad], -1))
+    vi, va = araim.error_models.gnss_variances(el)
+    si, sa = araim.error_models.sop_variances(jnp.full((n, n_sop), sigma_ura_sop_m))
+    L = n_gps + n_sop
+    shape = (n, L)
+    return dict(
+        g=g, constellation=jnp.broadcast_to(jnp.array([0] * n_gps + [1] * n_sop), shape),
+        var_int_m2=jnp.concatenate([vi, si], -1), var_acc_m2=jnp.concatenate([va, sa], -1),
+        b_nom_m=jnp.broadcast_to(jnp.array([0.75] * n_gps + [0.0] * n_sop), shape),
+        p_sat=jnp.broadcast_to(jnp.array([1e-5] * n_gps + [p_sat_sop] * n_sop), shape),
+        p_const=jnp.broadcast_to(jnp.array([1e-8, 1e-4]), (n, 2)),
+        valid=jnp.ones(shape, bool))
+
+
+def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
+    """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/."""
+    import araim
+    from araim.mhss import _protection_levels_jit
+
+    x = mhss_bench_inputs(batch)
+    budget = araim.BUDGET_SEED004_TABLE_I
+    order = 1  # what protection_levels(max_order=None) picks here (P(>1 faulty) = 4.5e-8)
+    args = (x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
+            x["p_sat"], x["p_const"], x["valid"])
+
+    def run():
+        return _protection_levels_jit(*args, budget=budget, max_order=order).hpl_m \
+            .block_until_ready()
+
+    run()
+    t = _best_time(run, repeats)
+    res = _protection_levels_jit(*args, budget=budget, max_order=order)
+    out = {"batch": batch, "jax_s": t, "jax_pl_per_s": batch / t,
+           "status_ok_share": float(np.mean(np.asarray(res.status) == 0)),
+           "n_modes": int(np.max(np.asarray(res.n_modes)))}
+    ref = _load_tests_module("reference_mhss")
+    if ref is not None:
+        xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
+
+        def run_ref():
+            return [ref.protection_levels_reference(
+                xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
+                xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
+                max_order=order) for i in range(ref_geometries)]
+
+        t0 = time.perf_counter()
+        refs = run_ref()
+        t_ref = time.perf_counter() - t0
+        hpl_ref = np.array([r.hpl_m for r in refs])
+        vpl_ref = np.array([r.vpl_m for r in refs])
+        hpl = np.asarray(res.hpl_m[:ref_geometries])
+        vpl = np.asarray(res.vpl_m[:ref_geometries])
+        fin = np.isfinite(hpl_ref) & np.isfinite(hpl)
+        out.update(reference_geometries=ref_geometries, reference_s=t_ref,
+                   reference_pl_per_s=ref_geometries / t_ref,
+                   speedup=(batch / t) / (ref_geometries / t_ref),
+                   max_abs_diff_m=float(max(np.max(np.abs(hpl - hpl_ref)[fin], initial=0),
+                                            np.max(np.abs(vpl - vpl_ref)[fin], initial=0))))
+    return out
+
+
+def profile_mhss(batch=65_536, repeats=3):
+    """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding."""
+    import araim
+    from araim.batching import map_chunks
+    from araim.fault_modes import fault_modes_batch_last
+    from araim.mhss import _batch_last_inputs, _pls_from_projection, _project
+
+    x = mhss_bench_inputs(batch)
+    budget = araim.BUDGET_SEED004_TABLE_I
+    arrays = [x[k] for k in ("g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m",
+                             "p_sat", "p_const", "valid")]
+
+    def stage(upto):
+        def kernel(*xs):
+            a = _batch_last_inputs(*xs)
+            if upto == "fault_modes":
+                out = fault_modes_batch_last(a[7], a[1], a[5], a[6], budget.p_thresh, 1).prior
+            else:
+                pr = _project(*a, budget, 1, "int")
+                if upto == "projectors":
+                    out = pr.threshold + pr.bias + pr.sigma
+                else:
+                    out = _pls_from_projection(pr, budget, 10)[0]
+            return jnp.moveaxis(out, -1, 0)
+
+        f = jax.jit(lambda *xs: map_chunks(kernel, xs, (batch,)))
+        f(*arrays)
+        return _best_time(lambda: jax.block_until_ready(f(*arrays)), repeats)
+
+    t = {s: stage(s) for s in ("fault_modes", "projectors", "all")}
+    return {"batch": batch, "fault_modes_s": t["fault_modes"],
+            "projectors_s": t["projectors"] - t["fault_modes"],
+            "pl_root_finding_s": t["all"] - t["projectors"], "total_s": t["all"]}

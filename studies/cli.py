@@ -147,6 +147,20 @@ def bench(
                   highlight=False)
     else:
         out.print("  NumPy reference: tests/reference.py not found (not a source checkout)")
+    m = b.bench_mhss(batch=16_384 if quick else 65_536, ref_geometries=50 if quick else 200)
+    res["mhss"] = m
+    out.print(f"MHSS PLs (9 GPS + 4 SOPs, Table I, {m['n_modes']} modes): "
+              f"{m['jax_pl_per_s']:,.0f} PL/s (batch {m['batch']:,}, best of 5)",
+              highlight=False)
+    if "speedup" in m:
+        out.print(f"  NumPy reference: {m['reference_pl_per_s']:,.1f} PL/s -> "
+                  f"{m['speedup']:,.0f}x; max |difference| {m['max_abs_diff_m']:.1e} m",
+                  highlight=False)
+    p = b.profile_mhss(batch=16_384 if quick else 65_536)
+    res["mhss_profile"] = p
+    out.print(f"  profile: fault modes {p['fault_modes_s'] / p['total_s']:.0%}, projectors "
+              f"(eqs. 9-12) {p['projectors_s'] / p['total_s']:.0%}, PL root finding "
+              f"{p['pl_root_finding_s'] / p['total_s']:.0%}", highlight=False)
     n3 = 100_000 if quick else 1_000_000
     res["fig3"] = b.bench_fig3(n3)
     out.print(f"seed001-fig3-elevation at {n3:,} realizations: {res['fig3']['wall_s']:.1f} s "
