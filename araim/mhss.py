@@ -427,18 +427,20 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
             x = np.asarray(arrays[name])
             bad = v & ~good(x)
             if bad.any():
-                raise ValueError(f"{name} of a valid source is invalid: {x[bad].ravel()[0]!r} "
+                value = float(x[bad].ravel()[0])
+                raise ValueError(f"{name} of a valid source is invalid: {value!r} "
                                  "(variances must be finite and > 0 (m^2), biases >= 0 (m), "
                                  "probabilities in [0, 1))")
         pc = np.asarray(p_const)
         if not np.all((pc >= 0) & (pc < 1)):
-            raise ValueError(f"p_const must lie in [0, 1), got {pc[~((pc >= 0) & (pc < 1))][0]!r}")
+            raise ValueError("p_const must lie in [0, 1), got "
+                             f"{float(pc[~((pc >= 0) & (pc < 1))][0])!r}")
         lab = np.asarray(constellation)
         if np.any(v & ((lab < 0) | (lab >= C))):
             raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
                              f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
-    except jax.errors.ConcretizationTypeError:  # traced: the caller validates outside jit
-        pass
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        pass  # traced: the caller validates outside jit
     return (g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"], arrays["b_nom_m"],
             arrays["p_sat"], p_const, valid)
 
@@ -451,7 +453,11 @@ def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_
     gp = group_probabilities(to_batch_last(valid, 1), to_batch_last(constellation, 1),
                              to_batch_last(p_sat, 1), to_batch_last(p_const, 1))
     r_max = max(1, min(cap, p_const.shape[-1]))
-    tails = np.asarray(faulty_constellation_tail(gp.p_fault, r_max))
+    try:
+        tails = np.asarray(faulty_constellation_tail(gp.p_fault, r_max))
+    except jax.errors.TracerArrayConversionError:
+        raise ValueError("max_order=None needs concrete probabilities; under jit pass "
+                         "max_order (e.g. 1 for the Table I GPS budget)") from None
     for r in range(1, r_max + 1):
         if np.all(tails[r - 1] <= p_thresh):
             return r
