@@ -24,6 +24,7 @@ from araim import linalg
 from araim.budget import IntegrityBudget
 from araim.fault_modes import to_batch_first, to_batch_last
 from araim.mhss import (
+    PL_ITERATIONS,
     MHSSResult,
     _batch_last_inputs,
     _pls_from_projection,
@@ -87,7 +88,7 @@ def _flatten(arrays, batch):
 
 @partial(jax.jit, static_argnames=("budget", "max_order", "weighting", "iterations"))
 def _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y, budget,
-                max_order, weighting="int", iterations=10):
+                max_order, weighting="int", iterations=PL_ITERATIONS):
     batch = g.shape[:-2]
     out = _separation_flat(*_flatten((g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
                                       valid, y), batch), budget, max_order, weighting, iterations)
@@ -113,7 +114,7 @@ def _wsse(g, constellation, var_int, valid, y, n_constellations):
 
 @partial(jax.jit, static_argnames=("budget", "max_order", "weighting", "iterations"))
 def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
-                        budget, max_order, weighting="int", iterations=10):
+                        budget, max_order, weighting="int", iterations=PL_ITERATIONS):
     top = _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
                       budget, max_order, weighting, iterations)
     # candidate subsets: one per mode (axis K moved to the front as a batch axis)

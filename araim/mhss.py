@@ -44,8 +44,8 @@ from araim.validate import check_int
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
 #: Illinois iterations. Measured on 65,536 geometries (9 GPS + 4 SOPs, Table I): 6 suffice for
-#: 1e-3 m, 7 give 1e-10 m; 10 leave a margin. Non-convergence is reported (NOT_CONVERGED).
-PL_ITERATIONS = 10
+#: 1e-3 m, 7 give 1e-10 m; 8 leave a margin. Non-convergence is reported (NOT_CONVERGED).
+PL_ITERATIONS = 8
 _SQRT1_2 = 0.7071067811865476
 #: sigma_ss below this fraction of sigma^(0) is rounding noise: the mode's separation is zero
 ZERO_SEPARATION_RTOL = 1e-9
@@ -243,6 +243,7 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     monitored = live & nonsingular
     aiv_ok = nonsingular[0]
     usable = monitored.at[0].set(aiv_ok)
+    s_pos_raw = s_pos
     s_pos = jnp.where(usable[:, None, None, :], s_pos, 0.0)
     sigma = jnp.sqrt(jnp.where(usable[:, None, :], jnp.maximum(var_pos, 0.0), 1.0))
     bias = jnp.where(usable[:, None, :], bias, 0.0)
@@ -268,7 +269,8 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
         n_valid < 3 + n_present + 1, Status.TOO_FEW_SOURCES,
         jnp.where(~aiv_ok, Status.SINGULAR_GEOMETRY,
                   jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK)))
-    sigma_acc_u = jnp.sqrt(jnp.sum(s_pos[0, 2] ** 2 * var_acc, axis=0))
+    sigma_acc_u = jnp.sqrt(jnp.sum(jnp.where(aiv_ok, s_pos_raw[0, 2], 0.0) ** 2 * var_acc,
+                                   axis=0))
     excluded = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)
     return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[0].set(False),
                       prior, excluded, n_modes, p_nm, fm.order, status.astype(jnp.int8),
