@@ -197,3 +197,46 @@ def profile_mhss(batch=65_536, repeats=3):
     return {"batch": batch, "fault_modes_s": t["fault_modes"],
             "projectors_s": t["projectors"] - t["fault_modes"],
             "pl_root_finding_s": t["all"] - t["projectors"], "total_s": t["all"]}
+
+
+def bench_sky(repeats=3):
+    """Issue 4: GPS + Galileo skies. (a) one receiver, 24 h at 30 s (2,880 epochs) of the
+    nominal 48-satellite sky, and of the Villafranca broadcast file when the data are present;
+    (b) 1,000 receivers (a 0.1-degree grid around Madrid) x 288 epochs (24 h at 5 min).
+    Best of ``repeats`` after a compiling call; the file's parse is cached per process and
+    reported separately."""
+    from geometry import gpstime
+
+    t0 = float(gpstime.gps_seconds(2018, 6, 19))
+    day30 = t0 + 30.0 * np.arange(2880)
+    day300 = t0 + 300.0 * np.arange(288)
+    rx = np.array([4849210.0, -360329.7, 4114920.0])
+
+    def one(source, t, receivers):
+        s = geometry.sky(receivers, t, source=source, mask_deg=5.0)
+        s.valid.block_until_ready()
+        return s
+
+    out = {}
+    one("nominal", day30, rx)
+    out["one_receiver_2880_epochs_nominal_s"] = _best_time(lambda: one("nominal", day30, rx),
+                                                           repeats)
+    from geometry.datafiles import data_dir
+
+    d = data_dir()
+    nav = None if d is None else d / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz"
+    if nav is not None and nav.is_file():
+        t_load = time.perf_counter()
+        eph = geometry.load_navigation(nav)
+        out["vill_parse_s"] = time.perf_counter() - t_load
+        one(eph, day30, rx)
+        out["one_receiver_2880_epochs_broadcast_s"] = _best_time(
+            lambda: one(eph, day30, rx), repeats)
+        out["broadcast_satellites"] = int(eph.prns.size)
+    lat = np.deg2rad(40.0 + 0.1 * (np.arange(1000) // 40))
+    lon = np.deg2rad(-6.0 + 0.1 * (np.arange(1000) % 40))
+    grid = np.asarray(geometry.geodetic_to_ecef(lat, lon, np.zeros(1000)))
+    one("nominal", day300, grid)
+    out["receivers_1000_x_288_epochs_nominal_s"] = _best_time(
+        lambda: one("nominal", day300, grid), repeats)
+    return out

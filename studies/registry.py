@@ -2,8 +2,9 @@
 
 from studies.seed001_fig3 import Fig3Elevation
 from studies.seed001_fig4 import Fig4HplCdf
+from studies.seed001_fig5 import Fig5Madrid24h
 
-STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf())}
+STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h())}
 
 
 def get_study(name):
