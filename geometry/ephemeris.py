@@ -315,7 +315,7 @@ class Ephemeris:
     def __repr__(self):
         n = {SYSTEM_NAMES[c]: int(np.sum(self.constellation == c)) for c in (GPS, GALILEO)}
         return (f"Ephemeris({Path(self.path).name}: {n}, {int(self.n_records.sum())} records, "
-                f"unhealthy {list(self.prns[~self.sat_healthy])})")
+                f"unhealthy {[str(p) for p in self.prns[~self.sat_healthy]]})")
 
     @property
     def record_span_s(self):

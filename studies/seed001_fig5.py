@@ -247,7 +247,10 @@ class Fig5Madrid24h(Study):
         s = geometry.sky(rx, t, source=source, mask_deg=params["mask_deg"],
                          constellations=("gps",))
         if real:
-            desc = s.source
+            bad = [str(p) for p, ok in zip(s.sv, np.asarray(s.valid).any(0), strict=True)
+                   if not ok]
+            desc = (f"broadcast ephemeris {Path(source).name} ({s.sv.size} GPS; never usable "
+                    f"in view: {', '.join(bad) or 'none'})")
         return t, np.asarray(s.az_rad), np.asarray(s.el_rad), np.asarray(s.valid), desc, real
 
     def run(self, params, realizations, seed, progress):
