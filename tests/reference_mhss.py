@@ -1,0 +1,420 @@
+"""Plain per-geometry NumPy/SciPy reference of the ARAIM / OARAIM MHSS solver (issue 3).
+
+The oracle of ``araim.protection_levels``, ``araim.solution_separation`` and
+``araim.detect_and_exclude``, and the "NumPy reference" of the benchmark (DESIGN.md). One geometry
+at a time, straight from seed 004 eqs. (8)-(16) with the corrections of DESIGN.md, written for
+clarity and not for speed:
+
+- fault modes are enumerated with ``itertools`` (grouping rule below), priors are products of
+  event probabilities (eq. 17 as corrected);
+- each fault-tolerant solution is an ordinary weighted least squares on the kept rows only, with
+  the clock columns of constellations that have no kept source literally removed;
+- each PL equation (14)/(16) is solved by bisection to 1e-6 m.
+
+Fault-mode grouping (the project's documented rule). For a present constellation c (one with at
+least one valid source) with valid sources S_c:
+
+    P_none_c   = (1 - P_const,c) prod_{l in S_c} (1 - P_s,l)
+    P_single_l = (1 - P_const,c) P_s,l prod_{l' in S_c, l' != l} (1 - P_s,l')   (|S_c| >= 2 only)
+    P_whole_c  = 1 - P_none_c - sum_l P_single_l   (constellation event or >= 2 faulty sources;
+                 = 1 - P_none_c when |S_c| = 1: single and whole coincide)
+    P_f,c      = 1 - P_none_c
+
+The order r is the smallest r in 1..R with P(more than r present constellations faulty) <=
+P_thresh (constellations independent), else R. For k = 1..r and every set F of k present
+constellations, the candidate modes are "whole F" (all sources of F excluded) and "resolved
+(l, F)" for every a in F with |S_a| >= 2 and l in S_a (l and all sources of F minus a excluded):
+each fault combination with exactly the constellations F faulty belongs to exactly one mode (the
+lowest-index constellation of F in a single-source state is resolved, all others excluded whole).
+
+All probabilities here are computed as sums of non-negative terms (no 1 - (1 - p) cancellation):
+P(at least k faulty sources) from the exact Poisson-binomial distribution, and the probability
+that more than r constellations are faulty by enumerating the faulty sets.
+"""
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import special
+
+OK, TOO_FEW_SOURCES, SINGULAR_GEOMETRY, NOT_CONVERGED, UNMONITORED_RISK = 0, 1, 2, 4, 5
+
+#: a normal matrix is singular when its smallest eigenvalue is below this times its largest
+#: diagonal entry (the spec: condition number above ~1e10)
+SINGULAR_RTOL = 1e-10
+#: a mode whose eigenvalue ratio lies within this factor of SINGULAR_RTOL (either side) is
+#: "borderline": an implementation with a different but reasonable test (Cholesky pivots, another
+#: tolerance) may call it either way, so comparisons treat such geometries separately
+BORDERLINE_FACTOR = 1e3
+#: a solution separation whose sigma_ss is below this times sigma_q^(0) is exactly zero (both the
+#: separation and the threshold), e.g. the lone-SOP mode of Theorem 1: tau = 0 (DESIGN.md)
+ZERO_SS_RTOL = 1e-9
+#: bisection tolerance of the PL root, metres
+PL_XTOL_M = 1e-6
+
+
+def q_func(x):
+    """Q(x) = P(N(0, 1) > x), accurate in the far tail."""
+    return special.ndtr(-np.asarray(x, float))
+
+
+def q_inv(p):
+    """Q^-1(p)."""
+    return -special.ndtri(p)
+
+
+def poisson_binomial_pmf(p):
+    """P(exactly k of the independent events with probabilities p occur), k = 0..len(p)."""
+    pmf = np.zeros(len(p) + 1)
+    pmf[0] = 1.0
+    for pk in p:
+        pmf[1:] = pmf[1:] * (1.0 - pk) + pmf[:-1] * pk
+        pmf[0] *= 1.0 - pk
+    return pmf
+
+
+@dataclass
+class Mode:
+    """One candidate fault mode."""
+
+    excluded: frozenset  # source indices hypothesised faulty
+    prior: float
+    kind: str  # "whole" or "resolved"
+    constellations: tuple  # F, the faulty constellations it stands for
+    source: int = -1  # the resolved source l (resolved modes)
+
+
+@dataclass
+class FaultModeSet:
+    present: list  # present constellation labels, ascending
+    sources: dict  # c -> list of valid source indices
+    p_none: dict
+    p_single: dict  # l -> P_single_l (only for constellations with >= 2 sources)
+    p_whole: dict
+    p_fault: dict
+    order: int
+    p_no_fault: float  # prod_c P_none_c
+    p_beyond_order: float  # P(more than r constellations faulty)
+    modes: list = field(default_factory=list)
+
+
+def fault_mode_set(valid, constellation, p_sat, p_const, p_thresh, max_order):
+    """Enumerate the candidate fault modes and their priors for one geometry."""
+    valid = np.asarray(valid, bool)
+    constellation = np.asarray(constellation, int)
+    p_sat = np.asarray(p_sat, float)
+    p_const = np.asarray(p_const, float)
+    present = sorted({int(c) for c in constellation[valid]})
+    sources = {c: [int(l) for l in np.flatnonzero(valid & (constellation == c))] for c in present}
+
+    p_none, p_single, p_whole, p_fault = {}, {}, {}, {}
+    for c in present:
+        pc = p_const[c]
+        ps = p_sat[sources[c]]
+        pmf = poisson_binomial_pmf(ps)
+        p_none[c] = (1.0 - pc) * pmf[0]
+        p_fault[c] = pc + (1.0 - pc) * pmf[1:].sum()  # = 1 - P_none_c
+        if len(sources[c]) >= 2:
+            for l in sources[c]:
+                others = [m for m in sources[c] if m != l]
+                p_single[l] = (1.0 - pc) * p_sat[l] * np.prod(1.0 - p_sat[others])
+            p_whole[c] = pc + (1.0 - pc) * pmf[2:].sum()  # event, or >= 2 faulty sources
+        else:
+            p_whole[c] = p_fault[c]
+
+    def p_more_than(r):
+        total = 0.0
+        for k in range(r + 1, len(present) + 1):
+            for faulty in itertools.combinations(present, k):
+                total += np.prod([p_fault[c] if c in faulty else p_none[c] for c in present])
+        return total
+
+    order = max_order
+    for r in range(1, max_order + 1):
+        if p_more_than(r) <= p_thresh:
+            order = r
+            break
+
+    fm = FaultModeSet(present, sources, p_none, p_single, p_whole, p_fault, order,
+                      float(np.prod([p_none[c] for c in present])), p_more_than(order))
+    for k in range(1, order + 1):
+        for F in itertools.combinations(present, k):
+            rest = np.prod([p_none[c] for c in present if c not in F])
+            excl = frozenset(l for c in F for l in sources[c])
+            fm.modes.append(Mode(excl, float(np.prod([p_whole[c] for c in F]) * rest),
+                                 "whole", F))
+            for a in F:
+                if len(sources[a]) < 2:
+                    continue
+                before = np.prod([p_whole[b] for b in F if b < a])
+                after = np.prod([p_fault[b] for b in F if b > a])
+                others = frozenset(l for b in F if b != a for l in sources[b])
+                for l in sources[a]:
+                    fm.modes.append(Mode(others | {l}, float(p_single[l] * before * after * rest),
+                                         "resolved", F, l))
+    return fm
+
+
+def design_matrix(g, constellation, kept):
+    """(H, rows): H = [G, B] over the kept rows, one clock column per constellation that still
+    has a kept source (the clocks of the others are literally removed)."""
+    rows = np.flatnonzero(kept)
+    cols = sorted({int(c) for c in constellation[rows]})
+    h = np.zeros((len(rows), 3 + len(cols)))
+    h[:, :3] = g[rows]
+    for j, c in enumerate(cols):
+        h[:, 3 + j] = constellation[rows] == c
+    return h, rows
+
+
+def wls_projector(g, constellation, kept, var_int, singular_rtol=SINGULAR_RTOL):
+    """Full-state WLS of the kept rows: ((S, N^-1, H, rows) or None when singular, ratio).
+
+    H = [G, B] over the kept rows, B with one column per constellation that still has a kept
+    source; S = N^-1 H^T W (all state rows), N = H^T W H, W = diag(1 / var_int). ratio = the
+    smallest eigenvalue of N over its largest diagonal entry (0 with fewer rows than states);
+    singular: ratio <= singular_rtol.
+    """
+    h, rows = design_matrix(g, constellation, kept)
+    if len(rows) < h.shape[1]:
+        return None, 0.0
+    w = np.diag(1.0 / var_int[rows])
+    n = h.T @ w @ h
+    ratio = float(np.linalg.eigvalsh(n).min() / np.diag(n).max())
+    if ratio <= singular_rtol:
+        return None, ratio
+    n_inv = np.linalg.inv(n)
+    return (n_inv @ h.T @ w, n_inv, h, rows), ratio
+
+
+@dataclass
+class ModeSolution:
+    mode: Mode | None  # None for the all-in-view solution
+    s_pos: np.ndarray  # (3, L) position rows of S^(i), zero outside the kept rows
+    sigma: np.ndarray  # (3,) eq. (9)
+    bias: np.ndarray  # (3,) eq. (10)
+    sigma_ss: np.ndarray = None  # (3,) eq. (11)
+    threshold: np.ndarray = None  # (3,) eq. (12)
+
+
+@dataclass
+class Result:
+    hpl_m: float
+    vpl_m: float
+    emt_m: float
+    sigma_acc_u_m: float
+    n_modes: int
+    p_not_monitored: float
+    status: int
+    order: int
+    pl_enu_m: np.ndarray
+    fault_modes: FaultModeSet
+    all_in_view: ModeSolution | None
+    monitored: list  # ModeSolution of the monitorable modes, in enumeration order
+    singular: list  # Mode of the candidate modes that are singular
+    k_fa: np.ndarray  # (3,)
+    borderline: bool = False  # some mode's (or the all-in-view) singularity test is borderline
+
+
+def _solution(g, constellation, kept, var_int, b_nom, mode, singular_rtol):
+    """(ModeSolution or None when singular, eigenvalue ratio of the normal matrix)."""
+    out, ratio = wls_projector(g, constellation, kept, var_int, singular_rtol)
+    if out is None:
+        return None, ratio
+    s, n_inv, _, rows = out
+    s_pos = np.zeros((3, len(kept)))
+    s_pos[:, rows] = s[:3]
+    sigma = np.sqrt(np.diag(n_inv)[:3])
+    bias = np.abs(s_pos) @ b_nom
+    return ModeSolution(mode, s_pos, sigma, bias), ratio
+
+
+def solve_pl(prior_fault_free, sigma0, bias0, priors, sigmas, offsets, rhs):
+    """Bisection root of  2 Q((PL - b0)/s0) + sum_i p_i Q((PL - offset_i)/s_i) = rhs."""
+    def risk(pl):
+        total = prior_fault_free * q_func((pl - bias0) / sigma0)
+        if len(priors):
+            total += np.sum(priors * q_func((pl - offsets) / sigmas))
+        return total
+
+    lo, hi = 0.0, 1.0
+    assert risk(lo) > rhs  # 2 Q(-b0/s0) >= 1 > rhs
+    while risk(hi) > rhs:
+        lo, hi = hi, 2.0 * hi
+        if hi > 1e12:
+            raise RuntimeError("no PL bracket")
+    while hi - lo > PL_XTOL_M:
+        mid = 0.5 * (lo + hi)
+        if risk(mid) > rhs:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                budget, valid=None, max_order=3, singular_rtol=SINGULAR_RTOL):
+    """Seed 004 eqs. (8)-(16) for ONE geometry; arguments as ``araim.protection_levels`` without
+    batch axes: g (L, 3), constellation/var_int/var_acc/b_nom/p_sat/valid (L,), p_const (C,)."""
+    g = np.asarray(g, float)
+    L = g.shape[0]
+    valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
+    constellation = np.asarray(constellation, int)
+    var_int = np.where(valid, np.asarray(var_int, float), 1.0)
+    var_acc = np.where(valid, np.asarray(var_acc, float), 1.0)
+    b_nom = np.where(valid, np.asarray(b_nom, float), 0.0)
+    g = np.where(valid[:, None], g, 0.0)
+
+    fm = fault_mode_set(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
+    inf3 = np.full(3, np.inf)
+
+    lo, hi = singular_rtol / BORDERLINE_FACTOR, singular_rtol * BORDERLINE_FACTOR
+    borderline = False
+
+    def failed(status, p_nm=np.nan, n_modes=0, aiv=None, monitored=(), singular=()):
+        return Result(np.inf, np.inf, np.inf, np.inf, n_modes, p_nm, status, fm.order, inf3, fm,
+                      aiv, list(monitored), list(singular), np.full(3, np.nan), borderline)
+
+    if valid.sum() < 3 + len(fm.present) + 1:
+        return failed(TOO_FEW_SOURCES)
+    aiv, ratio = _solution(g, constellation, valid, var_int, b_nom, None, singular_rtol)
+    borderline = lo <= ratio <= hi
+    if aiv is None:
+        return failed(SINGULAR_GEOMETRY)
+
+    monitored, singular = [], []
+    for mode in fm.modes:
+        kept = valid.copy()
+        kept[list(mode.excluded)] = False
+        sol, ratio = _solution(g, constellation, kept, var_int, b_nom, mode, singular_rtol)
+        borderline |= lo <= ratio <= hi
+        if sol is None:
+            singular.append(mode)
+        else:
+            diff = sol.s_pos - aiv.s_pos
+            sol.sigma_ss = np.sqrt((diff**2) @ var_acc)
+            sol.sigma_ss[sol.sigma_ss <= ZERO_SS_RTOL * aiv.sigma] = 0.0
+            monitored.append(sol)
+    n_f = len(monitored)
+    p_nm = fm.p_beyond_order + sum(m.prior for m in singular)
+    if p_nm > budget.p_thresh:
+        return failed(UNMONITORED_RISK, p_nm, n_f, aiv, monitored, singular)
+
+    k_fa = np.array([q_inv(budget.p_fa_h / (4 * n_f)), q_inv(budget.p_fa_h / (4 * n_f)),
+                     q_inv(budget.p_fa_v / (2 * n_f))]) if n_f else np.zeros(3)
+    for sol in monitored:
+        sol.threshold = k_fa * sol.sigma_ss
+
+    scale = 1.0 - p_nm / (budget.phmi_v + budget.phmi_h)
+    rhs = np.array([budget.phmi_h / 2, budget.phmi_h / 2, budget.phmi_v]) * scale
+    priors = np.array([m.mode.prior for m in monitored])
+    pl = np.zeros(3)
+    for q in range(3):
+        pl[q] = solve_pl(
+            2.0, aiv.sigma[q], aiv.bias[q], priors,
+            np.array([m.sigma[q] for m in monitored]),
+            np.array([m.threshold[q] + m.bias[q] for m in monitored]), rhs[q])
+
+    emt = max([m.threshold[2] for m in monitored if m.mode.prior >= budget.p_emt], default=0.0)
+    sigma_acc_u = float(np.sqrt(aiv.s_pos[2] ** 2 @ var_acc))
+    return Result(float(np.hypot(pl[0], pl[1])), float(pl[2]), float(emt), sigma_acc_u, n_f,
+                  float(p_nm), OK, fm.order, pl, fm, aiv, monitored, singular, k_fa, borderline)
+
+
+def pl_equation(res, budget, q, pl):
+    """Left-hand side and right-hand side of eq. (14) (q = 0, 1) or (16) (q = 2) at ``pl`` for an
+    OK result of ``protection_levels_reference``."""
+    aiv = res.all_in_view
+    lhs = 2.0 * q_func((pl - aiv.bias[q]) / aiv.sigma[q])
+    for m in res.monitored:
+        lhs += m.mode.prior * q_func((pl - m.threshold[q] - m.bias[q]) / m.sigma[q])
+    scale = 1.0 - res.p_not_monitored / (budget.phmi_v + budget.phmi_h)
+    rhs = (budget.phmi_h / 2.0 if q < 2 else budget.phmi_v) * scale
+    return float(lhs), float(rhs)
+
+
+@dataclass
+class Separation:
+    result: Result
+    separation: np.ndarray  # (N_f, 3) ((S^(i) - S^(0)) y)_q of the monitored modes
+    tau: np.ndarray  # (N_f, 3) eq. (13)
+    detected: bool
+    excluded: list  # frozensets, the excluded sources of each monitored mode
+
+
+def solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                  budget, residual, valid=None, max_order=3):
+    """Eq. (13) for one geometry and residual vector y (L,): separations, tau and detection."""
+    res = protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                      budget, valid, max_order)
+    y = np.asarray(residual, float)
+    if valid is not None:
+        y = np.where(np.asarray(valid, bool), y, 0.0)
+    if res.status not in (OK, UNMONITORED_RISK) or not res.monitored:
+        return Separation(res, np.zeros((0, 3)), np.zeros((0, 3)), False, [])
+    if res.status != OK:  # thresholds need K_fa, which needs N_f only
+        n_f = res.n_modes
+        k_fa = np.array([q_inv(budget.p_fa_h / (4 * n_f)), q_inv(budget.p_fa_h / (4 * n_f)),
+                         q_inv(budget.p_fa_v / (2 * n_f))])
+        for sol in res.monitored:
+            sol.threshold = k_fa * sol.sigma_ss
+    sep = np.array([(m.s_pos - res.all_in_view.s_pos) @ y for m in res.monitored])
+    thr = np.array([m.threshold for m in res.monitored])
+    zero = thr == 0.0
+    sep[zero] = 0.0  # a separation with zero variance is identically zero (Theorem 1)
+    tau = np.where(zero, 0.0, np.abs(sep) / np.where(zero, 1.0, thr))
+    return Separation(res, sep, tau, bool(np.any(tau > 1.0)),
+                      [m.mode.excluded for m in res.monitored])
+
+
+@dataclass
+class FDE:
+    detected: bool
+    excluded: np.ndarray  # (L,) bool, sources excluded
+    pl: Result  # the result after exclusion (all-in-view when nothing was detected)
+    status: int | None  # None: exclusion failed (the implementation picks the code)
+    candidates: list  # (excluded set, acceptable, weighted SSE) of every candidate tried
+
+
+def weighted_sse(g, constellation, kept, var_int, y):
+    """sum_l w_l (y_l - (H dx)_l)^2 over the kept rows, dx the full-state WLS solution."""
+    (s, _, h, rows), _ = wls_projector(g, constellation, kept, var_int)
+    dx = s @ y[rows]
+    r = y[rows] - h @ dx
+    return float(np.sum(r**2 / var_int[rows]))
+
+
+def detect_and_exclude_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                 budget, residual, valid=None, max_order=3):
+    """Detection and exclusion for one geometry: re-test every monitorable mode's subset with the
+    same residual; among the subsets that pass with status OK keep the smallest weighted SSE."""
+    L = np.asarray(g).shape[0]
+    valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
+    y = np.where(valid, np.asarray(residual, float), 0.0)
+    sep = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
+                                        p_const, budget, y, valid, max_order)
+    if not sep.detected:
+        return FDE(False, np.zeros(L, bool), sep.result, sep.result.status, [])
+    g_clean = np.where(valid[:, None], np.asarray(g, float), 0.0)
+    vi = np.where(valid, np.asarray(var_int, float), 1.0)
+    candidates, best = [], None
+    for excl in sep.excluded:
+        sub_valid = valid.copy()
+        sub_valid[list(excl)] = False
+        sub = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
+                                            p_const, budget, y, sub_valid, max_order)
+        ok = sub.result.status == OK and not sub.detected
+        sse = weighted_sse(g_clean, np.asarray(constellation, int), sub_valid, vi, y) if ok \
+            else np.inf
+        candidates.append((excl, ok, sse))
+        if ok and (best is None or sse < best[2]):
+            best = (sub_valid, sub.result, sse)
+    if best is None:  # exclusion failed: no PL (the status code is the implementation's choice)
+        res = sep.result
+        failed = Result(np.inf, np.inf, np.inf, np.inf, res.n_modes, res.p_not_monitored, None,
+                        res.order, np.full(3, np.inf), res.fault_modes, res.all_in_view,
+                        res.monitored, res.singular, res.k_fa, res.borderline)
+        return FDE(True, np.zeros(L, bool), failed, None, candidates)
+    sub_valid, res, _ = best
+    return FDE(True, valid & ~sub_valid, res, res.status, candidates)

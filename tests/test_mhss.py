@@ -1,0 +1,598 @@
+"""Tests of araim.protection_levels: ARAIM / OARAIM MHSS protection levels (seed 004 eqs. 8-16).
+
+The oracle is tests/reference_mhss.py (plain per-geometry NumPy/SciPy, enumerated modes, clock
+columns literally removed, bisection to 1e-6 m). Tolerances:
+
+- PLs and EMT within 2e-3 m (issue 3): the solver returns a PL within 1e-3 m above the root, the
+  oracle's bisection is good to 1e-6 m, the rest is float64 rounding of 5x5-ish systems.
+- sigma_acc_u, P_not_monitored to a relative 1e-7: both are closed-form sums/products; the
+  margin covers the conditioning of the normal matrices (~1e6 at worst here) times 1e-16.
+
+Compiled shapes are kept few (DESIGN.md): every random batch is padded to L = 28 sources
+(12 GPS + 8 Galileo + 8 SOP slots) and C = 4 constellation slots (GPS 0, Galileo 1, SOP 2, SOP 3),
+the hand cases to L = 8, C = 2.
+"""
+
+import jax
+import numpy as np
+import pytest
+from scipy import optimize, special
+
+import araim
+import geometry
+from araim import Status
+from araim.error_models import gnss_variances, sop_variances
+from tests import reference_mhss as ref
+
+L_GPS, L_GAL, L_SOP = 12, 8, 8
+L = L_GPS + L_GAL + L_SOP
+C = 4
+P_CONST = np.array([1e-8, 1e-4, 1e-4, 1e-4])  # GPS (Table I), Galileo (ADD), SOP (Table I)
+SIGMA_URA_S = np.array([0.5, *range(1, 26)], float)  # DESIGN.md Fig. 4 grid, 26 values
+P_S_S = 10.0 ** (-7.0 + 0.5 * np.arange(13))  # 1e-7 .. 1e-1, two per decade, 13 values
+N_RANDOM = 2000  # issue 3: >= 2000 geometries against the oracle
+PL_TOL_M = 2e-3  # issue 3
+TABLE_I = None  # set lazily: araim.BUDGET_SEED004_TABLE_I
+
+_sky = jax.jit(geometry.random_sky, static_argnums=(1, 3))
+_bpp = jax.jit(geometry.bpp_towers, static_argnums=(1, 6))
+
+
+def budget():
+    return araim.BUDGET_SEED004_TABLE_I
+
+
+def rows(az_rad, el_rad):
+    """Geometry rows in NumPy for hand-built cases: [-cos el sin az, -cos el cos az, -sin el]."""
+    az, el = np.broadcast_arrays(np.asarray(az_rad, float), np.asarray(el_rad, float))
+    return np.stack([-np.cos(el) * np.sin(az), -np.cos(el) * np.cos(az), -np.sin(el)], axis=-1)
+
+
+def random_cases(seed, n):
+    """n random GPS + SOP geometries spanning Table I (issue 3), padded to L = 28, rows shuffled.
+
+    GPS: 5..12 random-sky satellites above a 5, 10 or 15 deg mask; Galileo on for half of the
+    geometries (4..8 satellites, same mask); 1..8 BPP towers (distance 200..3000 m, height
+    -200..+50 m relative to the receiver: an aircraft mostly above the towers, so SOP verticals
+    are not always singular) in one SOP constellation or split at random over two. SOP
+    sigma_URA^S and P_s^S from the Fig. 4 grid of DESIGN.md, b_nom^S = 0 (DESIGN.md) except for
+    a quarter of the geometries (0.5 m, to exercise eq. 10 on SOPs). GNSS error models from
+    araim.error_models (ADD), b_nom = 0.75 m, P_s = 1e-5. Padding rows hold finite junk.
+    Returns a dict of arrays (batch first) and the per-geometry counts.
+    """
+    keys = jax.random.split(jax.random.key(seed), 8)
+    rng = np.random.default_rng(seed)
+    masks = np.deg2rad([5.0, 10.0, 15.0])
+    which = rng.integers(0, 3, n)
+    az_g = np.empty((n, L_GPS))
+    el_g = np.empty((n, L_GPS))
+    az_e = np.empty((n, L_GAL))
+    el_e = np.empty((n, L_GAL))
+    for k, mask in enumerate(masks):
+        a, e = (np.asarray(x) for x in _sky(keys[k], L_GPS, mask, (n,)))
+        az_g[which == k], el_g[which == k] = a[which == k], e[which == k]
+        a, e = (np.asarray(x) for x in _sky(keys[3 + k], L_GAL, mask, (n,)))
+        az_e[which == k], el_e[which == k] = a[which == k], e[which == k]
+    tw = _bpp(keys[6], L_SOP, 200.0, 3000.0, -200.0, 50.0, (n,))
+    az = np.concatenate([az_g, az_e, np.asarray(tw.az_rad)], axis=1)
+    el = np.concatenate([el_g, el_e, np.asarray(tw.el_rad)], axis=1)
+
+    n_gps = rng.integers(5, L_GPS + 1, n)
+    n_gal = np.where(rng.random(n) < 0.5, rng.integers(4, L_GAL + 1, n), 0)
+    n_sop = rng.integers(1, L_SOP + 1, n)
+    two_sop = rng.random(n) < 0.5
+    idx = np.arange(L)
+    valid = ((idx < n_gps[:, None])
+             | ((idx >= L_GPS) & (idx < L_GPS + n_gal[:, None]))
+             | ((idx >= L_GPS + L_GAL) & (idx < L_GPS + L_GAL + n_sop[:, None])))
+    const = np.broadcast_to(np.where(idx < L_GPS, 0, np.where(idx < L_GPS + L_GAL, 1, 2)),
+                            (n, L)).copy()
+    split = two_sop[:, None] & (rng.random((n, L)) < 0.5) & (idx >= L_GPS + L_GAL)
+    const[split] = 3
+
+    sigma_s = SIGMA_URA_S[rng.integers(0, len(SIGMA_URA_S), n)]
+    p_s = P_S_S[rng.integers(0, len(P_S_S), n)]
+    vi_g, va_g = (np.asarray(x) for x in gnss_variances(el, 1.0))
+    vi_s, va_s = (np.asarray(x) for x in sop_variances(sigma_s[:, None] * np.ones((1, L))))
+    sop = const >= 2
+    var_int = np.where(sop, vi_s, vi_g)
+    var_acc = np.where(sop, va_s, va_g)
+    b_sop = np.where(rng.random(n) < 0.25, 0.5, 0.0)
+    b_nom = np.where(sop, b_sop[:, None], 0.75)
+    p_sat = np.where(sop, p_s[:, None], 1e-5)
+
+    g = np.asarray(geometry.geometry_rows(az, el)).copy()
+    bad = ~valid
+    g[bad] = rng.normal(0.0, 3.0, (bad.sum(), 3))  # finite junk padding
+    var_int[bad] = rng.uniform(0.0, 5.0, bad.sum())
+    var_acc[bad] = -1.0
+    b_nom[bad] = 7.0
+    p_sat[bad] = 0.5
+    const[bad] = rng.integers(0, C, bad.sum())
+
+    perm = np.argsort(rng.random((n, L)), axis=1)
+    take = np.take_along_axis
+    case = dict(g=take(g, perm[..., None], 1), constellation=take(const, perm, 1),
+                var_int=take(var_int, perm, 1), var_acc=take(var_acc, perm, 1),
+                b_nom=take(b_nom, perm, 1), p_sat=take(p_sat, perm, 1),
+                p_const=np.broadcast_to(P_CONST, (n, C)).copy(), valid=take(valid, perm, 1))
+    info = dict(n_gps=n_gps, n_gal=n_gal, n_sop=n_sop, two_sop=two_sop, sigma_s=sigma_s, p_s=p_s)
+    return case, info
+
+
+def run_jax(case, bud=None, max_order=3, sl=slice(None)):
+    res = araim.protection_levels(
+        case["g"][sl], case["constellation"][sl], case["var_int"][sl], case["var_acc"][sl],
+        case["b_nom"][sl], case["p_sat"][sl], case["p_const"][sl], bud or budget(),
+        valid=case["valid"][sl], max_order=max_order)
+    return {k: np.asarray(getattr(res, k)) for k in res._fields}
+
+
+def run_ref(case, i, bud=None, max_order=3, singular_rtol=ref.SINGULAR_RTOL):
+    return ref.protection_levels_reference(
+        case["g"][i], case["constellation"][i], case["var_int"][i], case["var_acc"][i],
+        case["b_nom"][i], case["p_sat"][i], case["p_const"][i], bud or budget(),
+        case["valid"][i], max_order, singular_rtol)
+
+
+def borderline_readings(case, i, **kw):
+    """The oracle under the two readings of a borderline singularity test: every borderline
+    subset monitorable (tolerance well below the band) or singular (well above)."""
+    lo = ref.SINGULAR_RTOL / ref.BORDERLINE_FACTOR / 10
+    hi = ref.SINGULAR_RTOL * ref.BORDERLINE_FACTOR * 10
+    return [run_ref(case, i, singular_rtol=lo, **kw), run_ref(case, i, singular_rtol=hi, **kw)]
+
+
+def assert_no_nan(res):
+    for k, v in res.items():
+        assert not np.any(np.isnan(np.asarray(v, float))), k
+
+
+def compare(res, i, o):
+    """Compare geometry i of the batched result with the oracle's result o; returns a list of
+    mismatch descriptions (empty when they agree)."""
+    bad = []
+    st = int(res["status"][i])
+    if st != o.status:
+        return [f"status {st} != {o.status}"]
+    if int(res["order"][i]) != o.order:
+        bad.append(f"order {int(res['order'][i])} != {o.order}")
+    if o.status in (ref.OK, ref.UNMONITORED_RISK):
+        if int(res["n_modes"][i]) != o.n_modes:
+            bad.append(f"n_modes {int(res['n_modes'][i])} != {o.n_modes}")
+        if not np.isclose(res["p_not_monitored"][i], o.p_not_monitored, rtol=1e-7, atol=1e-18):
+            bad.append(f"p_nm {res['p_not_monitored'][i]:.6e} != {o.p_not_monitored:.6e}")
+    if o.status == ref.OK:
+        for name, want in (("hpl_m", o.hpl_m), ("vpl_m", o.vpl_m), ("emt_m", o.emt_m)):
+            if not abs(res[name][i] - want) <= PL_TOL_M:
+                bad.append(f"{name} {res[name][i]:.6f} != {want:.6f}")
+        if not np.isclose(res["sigma_acc_u_m"][i], o.sigma_acc_u_m, rtol=1e-7):
+            bad.append(f"sigma_acc_u {res['sigma_acc_u_m'][i]} != {o.sigma_acc_u_m}")
+    else:
+        for name in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m"):
+            if res[name][i] != np.inf:
+                bad.append(f"{name} = {res[name][i]} with status {st}")
+    return bad
+
+
+# --------------------------------------------------------------------------- oracle, random
+
+
+@pytest.fixture(scope="module")
+def random_batch():
+    case, info = random_cases(20261125, N_RANDOM)
+    res = run_jax(case)
+    oracle = [run_ref(case, i) for i in range(N_RANDOM)]
+    return case, info, res, oracle
+
+
+def _describe(info, i):
+    return {k: (v[i].item() if hasattr(v[i], "item") else v[i]) for k, v in info.items()}
+
+
+NOT_CONVERGED = "NOT_CONVERGED where the oracle is OK"
+
+
+def _mismatches(res, i, o):
+    """compare(), with the root finder's failure to converge on an OK geometry reported as its
+    own kind (tested separately below, so that it does not mask other disagreements)."""
+    if int(res["status"][i]) == Status.NOT_CONVERGED and o.status == ref.OK:
+        return [NOT_CONVERGED]
+    return compare(res, i, o)
+
+
+def test_random_geometries_match_oracle(random_batch):
+    """>= 2000 GPS + SOP geometries spanning Table I: hpl, vpl, emt within 2e-3 m, status,
+    order, n_modes and P_not_monitored equal, wherever both enumerate the same modes: the
+    geometries with a fault-tolerant subset whose normal matrix is within a factor 1e3 of the
+    singularity tolerance (condition ~1e7..1e13) are compared in the next test instead."""
+    case, info, res, oracle = random_batch
+    assert_no_nan(res)
+    failures = []
+    clear = [i for i in range(N_RANDOM) if not oracle[i].borderline]
+    assert len(clear) >= 0.97 * N_RANDOM
+    for i in clear:
+        bad = _mismatches(res, i, oracle[i])
+        if bad and bad != [NOT_CONVERGED]:
+            failures.append(f"geometry {i} ({_describe(info, i)}): {bad}")
+    assert not failures, f"{len(failures)} mismatches:\n" + "\n".join(failures[:20])
+
+
+def test_borderline_geometries_match_one_reading(random_batch):
+    """Geometries with a nearly singular subset: the solver agrees with the oracle under one of
+    the two readings of the singularity test (subset monitorable, or not)."""
+    case, info, res, oracle = random_batch
+    failures = []
+    for i in (i for i in range(N_RANDOM) if oracle[i].borderline):
+        readings = [_mismatches(res, i, o) for o in borderline_readings(case, i)]
+        if all(readings) and [NOT_CONVERGED] not in readings:
+            failures.append(f"geometry {i} ({_describe(info, i)}): {readings}")
+    assert not failures, f"{len(failures)} mismatches:\n" + "\n".join(failures[:20])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "implementation (araim.mhss at 54ace1d, 10 Illinois iterations): status NOT_CONVERGED on "
+    "~0.5% of the random geometries whose PL equation has a mode with sigma_U ~1e3..1e4 m "
+    "(SOP-only subsets, VPL 1e4..6e4 m; e.g. seed 20261125 geometries 48, 183, 872, 1351); "
+    "the oracle's bisection gives a finite PL"))
+def test_pl_root_finder_converges_where_the_oracle_is_ok(random_batch):
+    """A fixed iteration count must still converge (status OK) wherever the PL exists."""
+    case, info, res, oracle = random_batch
+    stuck = [i for i in range(N_RANDOM) if int(res["status"][i]) == Status.NOT_CONVERGED
+             and oracle[i].status == ref.OK]
+    detail = [f"geometry {i} ({_describe(info, i)}): oracle PL_ENU {oracle[i].pl_enu_m}"
+              for i in stuck]
+    assert not stuck, f"{len(stuck)} not converged:\n" + "\n".join(detail[:20])
+
+
+def test_random_geometries_span_the_intended_cases(random_batch):
+    """The random set really spans Table I: every order 1..3, OK and UNMONITORED_RISK statuses,
+    one and two SOP constellations, Galileo on and off, SOP-fault modes with large priors."""
+    case, info, res, _ = random_batch
+    assert set(np.unique(res["order"])) == {1, 2, 3}
+    assert np.mean(res["status"] == Status.OK) > 0.7
+    assert np.any(res["status"] == Status.UNMONITORED_RISK)
+    assert np.any(info["two_sop"]) and np.any(~info["two_sop"])
+    assert np.any(info["n_gal"] == 0) and np.any(info["n_gal"] > 0)
+    ok = res["status"] == Status.OK
+    assert np.all(np.isfinite(res["hpl_m"][ok])) and np.all(np.isfinite(res["vpl_m"][ok]))
+
+
+def test_forced_order_one_matches_oracle():
+    """max_order = 1 on geometries that need more: order 1, P(more than one constellation
+    faulty) counted unmonitored, status UNMONITORED_RISK where it exceeds P_thresh."""
+    n = 200
+    case, _ = random_cases(77, n)
+    res = run_jax(case, max_order=1)
+    assert_no_nan(res)
+    assert np.all(res["order"] == 1)
+    assert np.any(res["status"] == Status.UNMONITORED_RISK)
+    failures = [f"{i}: {b}" for i in range(n) if (b := compare(res, i, run_ref(case, i,
+                                                                                max_order=1)))]
+    assert not failures, "\n".join(failures[:20])
+
+
+def test_lpv200_budget_matches_oracle():
+    """The other preset (LPV-200, ADD): different K_fa and PHMI split, same agreement."""
+    n = 200
+    case, _ = random_cases(78, n)
+    bud = araim.BUDGET_LPV200
+    res = run_jax(case, bud=bud)
+    failures = [f"{i}: {b}" for i in range(n)
+                if (b := compare(res, i, run_ref(case, i, bud=bud)))]
+    assert not failures, "\n".join(failures[:20])
+
+
+# --------------------------------------------------------------------------- hand-derived cases
+#
+# Geometry "ring + zenith": constellation 0 has four satellites at elevation e, azimuths 0, 90,
+# 180, 270 deg, and one at the zenith, unit variances. With c = cos e, s = sin e the normal
+# matrix is block diagonal: E and N get 4 c^2 / 2 = 2 c^2 each, and the (U, clock) block is
+# [[4 s^2 + 1, -(4 s + 1)], [-(4 s + 1), 5]] with determinant 4 (1 - s)^2, so
+#     sigma_E^2 = sigma_N^2 = 1 / (2 c^2),     sigma_U^2 = 5 / (4 (1 - s)^2),
+# and the vertical projector is S_U = 1 / (4 (1 - s)) on each ring satellite, -1 / (1 - s) on the
+# zenith one; the east projector is -sin(az) / (2 c) (N: -cos(az) / (2 c)). With the same b_nom
+# = b everywhere: b_E = b_N = b / c (eq. 10: 2 b / (2 c)), b_U = 2 b / (1 - s).
+
+EL_RING = np.deg2rad(30.0)
+AZ_RING = np.deg2rad([0.0, 90.0, 180.0, 270.0])
+
+
+def ring_zenith_rows():
+    return rows(np.r_[AZ_RING, 0.0], np.r_[np.full(4, EL_RING), 0.5 * np.pi])
+
+
+def pad(n_rows, *arrays, fill=0.0, length=8):
+    """Pad (n_rows, ...) arrays to `length` rows; returns the padded arrays and valid."""
+    out = []
+    for a in arrays:
+        a = np.asarray(a)
+        p = np.full((length - n_rows, *a.shape[1:]), fill, dtype=a.dtype)
+        out.append(np.concatenate([a, p]))
+    return out + [np.arange(length) < n_rows]
+
+
+def test_fault_free_prior_pl_is_closed_form():
+    """P(no fault) = 1 (every P_s and P_const zero): only the fault-free term of eqs. (14)/(16)
+    carries probability, so PL_q = b_q^(0) + sigma_q^(0) Q^-1(rhs_q / 2) with P_nm = 0."""
+    c, s, b = np.cos(EL_RING), np.sin(EL_RING), 0.4
+    g, const, var, bnom, p, valid = pad(5, ring_zenith_rows(), np.zeros(5, int), np.ones(5),
+                                        np.full(5, b), np.zeros(5))
+    bud = budget()
+    res = araim.protection_levels(g, const, var, var, bnom, p, np.zeros(2), bud, valid=valid,
+                                  max_order=1)
+    assert int(res.status) == Status.OK
+    assert float(res.p_not_monitored) == 0.0
+    sig_e, sig_u = 1.0 / np.sqrt(2.0 * c**2), np.sqrt(5.0 / (4.0 * (1.0 - s) ** 2))
+    pl_e = b / c + sig_e * -special.ndtri(bud.phmi_h / 4.0)
+    pl_u = 2.0 * b / (1.0 - s) + sig_u * -special.ndtri(bud.phmi_v / 2.0)
+    assert abs(float(res.hpl_m) - np.sqrt(2.0) * pl_e) <= PL_TOL_M
+    assert abs(float(res.vpl_m) - pl_u) <= PL_TOL_M
+    assert float(res.sigma_acc_u_m) == pytest.approx(sig_u, rel=1e-12)
+    assert float(res.emt_m) == 0.0  # no mode has prior >= P_EMT
+    o = ref.protection_levels_reference(g, const, var, var, bnom, p, np.zeros(2), bud, valid, 1)
+    assert o.hpl_m == pytest.approx(np.sqrt(2.0) * pl_e, abs=1e-5)
+    assert o.vpl_m == pytest.approx(pl_u, abs=1e-5)
+    # candidate modes: 5 singles (the zenith one singular: the ring alone cannot separate U from
+    # the clock) and the whole constellation (singular): 4 monitored
+    assert int(res.n_modes) == o.n_modes == 4
+
+
+def test_lone_sop_mode_closed_form():
+    """Ring + zenith (priors 0) plus ONE SOP in its own constellation with P_s = p: the only mode
+    with a prior is the lone SOP, whose fault-tolerant solution is the all-in-view one (Theorem
+    1: S^(i) = S^(0), T = 0, b^(i) = b^(0)), so eq. (16) reads (2 + p) Q((PL - b0)/sigma0) = rhs:
+    PL_q = b_q^(0) + sigma_q^(0) Q^-1(rhs_q / (2 + p)), with the GNSS-only sigma's above."""
+    c, s, p = np.cos(EL_RING), np.sin(EL_RING), 1e-3
+    g6 = np.vstack([ring_zenith_rows(), rows(np.deg2rad(40.0), np.deg2rad(-5.0))])
+    g, const, var, bnom, psat, valid = pad(6, g6, np.r_[np.zeros(5, int), 1],
+                                           np.r_[np.ones(5), 9.0], np.zeros(6),
+                                           np.r_[np.zeros(5), p])
+    bud = budget()
+    res = araim.protection_levels(g, const, var, var, bnom, psat, np.zeros(2), bud,
+                                  valid=valid, max_order=1)
+    assert int(res.status) == Status.OK
+    sig_e, sig_u = 1.0 / np.sqrt(2.0 * c**2), np.sqrt(5.0 / (4.0 * (1.0 - s) ** 2))
+    pl_e = sig_e * -special.ndtri(bud.phmi_h / 2.0 / (2.0 + p))
+    pl_u = sig_u * -special.ndtri(bud.phmi_v / (2.0 + p))
+    assert abs(float(res.hpl_m) - np.sqrt(2.0) * pl_e) <= PL_TOL_M
+    assert abs(float(res.vpl_m) - pl_u) <= PL_TOL_M
+    assert float(res.p_not_monitored) == 0.0  # whole-GNSS mode is singular but has prior 0
+    assert float(res.emt_m) == pytest.approx(0.0, abs=1e-9)  # T = 0 for the lone SOP
+    # monitored: 4 ring singles (zenith single singular) + the lone SOP
+    assert int(res.n_modes) == 5
+
+
+def test_one_weighted_mode_pl_solves_the_equation():
+    """Ring + zenith (priors 0) plus a two-SOP constellation at azimuths 90 and 270 deg on the
+    horizon (variance v, P_const = p, P_s = 0). The SOP pair adds only the east difference
+    (g1 - g2 = [-2, 0, 0], variance 2 v): all-in-view sigma_E^2 = 1 / (2 c^2 + 2 / v), and the
+    whole-SOP mode (prior p, the only one with a prior) has sigma_E^(1)2 = 1 / (2 c^2), with
+    sigma_ss,E^2 = sigma_E^(1)2 - sigma_E^(0)2 (C_acc = C_int, so the separation variance is the
+    difference of variances), N and U untouched (sigma_ss = 0). N_f = 4 ring singles + 2 SOP
+    singles + whole SOP = 7 (zenith single and whole GNSS singular, prior 0), so
+    K_fa,E = Q^-1(P_FA_H / 28) and PL_E solves
+        2 Q(PL / sigma_E^(0)) + p Q((PL - K_fa,E sigma_ss,E) / sigma_E^(1)) = PHMI_H / 2,
+    while PL_N = sigma_N Q^-1(rhs / (2 + p)) and PL_U = sigma_U Q^-1(PHMI_V / (2 + p))."""
+    c, s, v, p = np.cos(EL_RING), np.sin(EL_RING), 4.0, 1e-4
+    g7 = np.vstack([ring_zenith_rows(), rows(np.deg2rad([90.0, 270.0]), [0.0, 0.0])])
+    g, const, var, bnom, psat, valid = pad(7, g7, np.r_[np.zeros(5, int), 1, 1],
+                                           np.r_[np.ones(5), v, v], np.zeros(7), np.zeros(7))
+    bud = budget()
+    res = araim.protection_levels(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
+                                  valid=valid, max_order=1)
+    assert int(res.status) == Status.OK
+    assert int(res.n_modes) == 7
+    assert float(res.p_not_monitored) == 0.0
+    s0_e, s1_e = 1.0 / np.sqrt(2 * c**2 + 2 / v), 1.0 / np.sqrt(2 * c**2)
+    s_ss = np.sqrt(s1_e**2 - s0_e**2)
+    k_e = -special.ndtri(bud.phmi_h / 28.0)
+    q = special.ndtr
+
+    def f(x):
+        return 2 * q(-x / s0_e) + p * q(-(x - k_e * s_ss) / s1_e) - bud.phmi_h / 2
+
+    pl_e = optimize.brentq(f, 0.0, 100.0, xtol=1e-12)
+    pl_n = s1_e * -special.ndtri(bud.phmi_h / 2 / (2 + p))
+    pl_u = np.sqrt(5 / (4 * (1 - s) ** 2)) * -special.ndtri(bud.phmi_v / (2 + p))
+    pl = np.asarray(res.pl_enu_m)
+    assert abs(pl[0] - pl_e) <= PL_TOL_M and pl[0] >= pl_e - 1e-9  # returned end is the upper
+    assert abs(pl[1] - pl_n) <= PL_TOL_M
+    assert abs(pl[2] - pl_u) <= PL_TOL_M
+    assert float(res.hpl_m) == pytest.approx(np.hypot(pl[0], pl[1]), rel=1e-12)
+    o = ref.protection_levels_reference(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
+                                        valid, 1)
+    assert o.n_modes == 7 and o.pl_enu_m == pytest.approx([pl_e, pl_n, pl_u], abs=1e-5)
+
+
+def test_pl_brackets_the_root_of_the_oracle_equation(random_batch):
+    """The returned PL satisfies eqs. (14)/(16) built from the oracle's sigmas, biases,
+    thresholds and priors: risk(PL) <= rhs (the PL is on the safe side) and
+    risk(PL - 2e-3 m) > rhs (within the tolerance of the root)."""
+    case, _, res, oracle = random_batch
+    bud = budget()
+    checked = 0
+    for i in range(0, N_RANDOM, 5):
+        o = oracle[i]
+        if o.status != ref.OK or o.borderline:
+            continue
+        for q in range(3):
+            x = res["pl_enu_m"][i, q]
+            lhs, rhs = ref.pl_equation(o, bud, q, x)
+            assert lhs <= rhs * (1 + 1e-9), (i, q, x)
+            lhs, rhs = ref.pl_equation(o, bud, q, x - PL_TOL_M)
+            assert lhs > rhs, (i, q, x)
+        checked += 1
+    assert checked > 250
+
+
+# --------------------------------------------------------------------------- invariances
+
+
+N_SMALL = 64  # one batch size for the small random tests: one compilation
+
+
+def _small_batch(seed=5):
+    case, _ = random_cases(seed, N_SMALL)
+    return case
+
+
+def test_padding_invariance_nan_and_inf_rows():
+    """Extra invalid rows with NaN/inf geometry, NaN variances and probabilities, out-of-range
+    labels, anywhere in the row order, change nothing (same status, n_modes; PLs to 1e-9 m: the
+    order of floating sums may change with the row positions)."""
+    case = _small_batch()
+    base = run_jax(case)
+    n, extra = case["g"].shape[0], 4
+    rng = np.random.default_rng(11)
+    big = {}
+    junk = {"g": np.nan, "constellation": 99, "var_int": np.nan, "var_acc": np.inf,
+            "b_nom": np.nan, "p_sat": np.nan, "valid": False}
+    for k, v in case.items():
+        if k == "p_const":
+            big[k] = v
+            continue
+        shape = (n, extra) + v.shape[2:]
+        big[k] = np.concatenate([v, np.full(shape, junk[k], dtype=v.dtype)], axis=1)
+    big["g"][:, L:, 0] = np.inf
+    perm = np.argsort(rng.random((n, L + extra)), axis=1)
+    for k in big:
+        if k == "p_const":
+            continue
+        p = perm if big[k].ndim == 2 else perm[..., None]
+        big[k] = np.take_along_axis(big[k], p, 1)
+    out = run_jax(big)
+    assert_no_nan(out)
+    for k in ("status", "order", "n_modes"):
+        np.testing.assert_array_equal(out[k], base[k], err_msg=k)
+    for k in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m", "p_not_monitored"):
+        np.testing.assert_allclose(out[k], base[k], rtol=1e-9, atol=1e-9, err_msg=k)
+
+
+def test_absent_constellation_p_const_is_ignored():
+    """A constellation slot with no valid source has no clock and no P_const event: changing its
+    P_const changes nothing (Galileo off, or an empty second SOP constellation)."""
+    case = _small_batch(seed=6)
+    base = run_jax(case)
+    present = np.zeros((case["g"].shape[0], C), bool)
+    for c in range(C):
+        present[:, c] = np.any(case["valid"] & (case["constellation"] == c), axis=1)
+    assert np.any(~present)
+    alt = dict(case)
+    alt["p_const"] = np.where(present, case["p_const"], 0.3)
+    out = run_jax(alt)
+    for k in base:
+        np.testing.assert_array_equal(out[k], base[k], err_msg=k)
+
+
+def test_batch_shape_invariance():
+    """(4,) batch, (2, 2) batch and single geometries give identical results (the small GNSS
+    cases below, OK and failed ones mixed)."""
+    cases = [_gps_only(8), _gps_only(4), _gps_only(7), _gps_only(8, p_const_gps=1e-6)]
+    stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
+    flat = araim.protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
+    shaped = araim.protection_levels(*(a.reshape((2, 2) + a.shape[1:]) for a in stacked[:-1]),
+                                     budget(), valid=stacked[-1].reshape(2, 2, -1), max_order=1)
+    for k in flat._fields:
+        a, b = np.asarray(getattr(flat, k)), np.asarray(getattr(shaped, k))
+        assert b.shape[:2] == (2, 2), k
+        np.testing.assert_array_equal(b.reshape(a.shape), a, err_msg=k)
+    for i, c in enumerate(cases):
+        one = araim.protection_levels(*c[:-1], budget(), valid=c[-1], max_order=1)
+        for k in flat._fields:
+            np.testing.assert_allclose(np.asarray(getattr(one, k)),
+                                       np.asarray(getattr(flat, k))[i], rtol=1e-12, err_msg=k)
+
+
+def test_broadcast_arguments():
+    """Scalars and per-constellation p_const broadcast over the batch like full arrays."""
+    case = _small_batch(seed=8)
+    full = dict(case)
+    full["b_nom"] = np.full_like(case["b_nom"], 0.75)
+    a = run_jax(full)
+    res = araim.protection_levels(case["g"], case["constellation"], case["var_int"],
+                                  case["var_acc"], 0.75, case["p_sat"], P_CONST, budget(),
+                                  valid=case["valid"], max_order=3)
+    for k in a:
+        np.testing.assert_array_equal(np.asarray(getattr(res, k)), a[k], err_msg=k)
+
+
+# --------------------------------------------------------------------------- failures as data
+
+
+def _gps_only(n_sats, el_deg=None, p_const_gps=1e-8, length=8):
+    rng = np.random.default_rng(n_sats)
+    az = rng.uniform(0, 2 * np.pi, n_sats)
+    el = np.deg2rad(el_deg if el_deg is not None else rng.uniform(10, 80, n_sats))
+    vi, va = (np.asarray(x) for x in gnss_variances(el * np.ones(n_sats)))
+    g, const, vi, va, b, p, valid = pad(n_sats, rows(az, el * np.ones(n_sats)),
+                                        np.zeros(n_sats, int), vi, va, np.full(n_sats, 0.75),
+                                        np.full(n_sats, 1e-5), length=length)
+    vi[~valid] = va[~valid] = 1.0
+    return g, const, vi, va, b, p, np.array([p_const_gps, 1e-4]), valid
+
+
+def _assert_failed(res, status):
+    for k in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m"):
+        v = np.asarray(getattr(res, k))
+        assert np.all(v == np.inf), (k, v)
+    for k in res._fields:
+        assert not np.any(np.isnan(np.asarray(getattr(res, k), float))), k
+    assert np.all(np.asarray(res.status) == status)
+
+
+def test_too_few_sources_is_inf_with_status_1():
+    """4 GPS satellites: 3 + 1 states + 1 redundancy needed = 5 sources; also 0 sources."""
+    args = _gps_only(4)
+    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+                   Status.TOO_FEW_SOURCES)
+    none = np.zeros(8, bool)
+    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=none, max_order=1),
+                   Status.TOO_FEW_SOURCES)
+    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    assert o.status == ref.TOO_FEW_SOURCES and o.hpl_m == np.inf
+
+
+def test_singular_all_in_view_is_inf_with_status_2():
+    """Six satellites all at 40 deg elevation: up and clock columns are collinear."""
+    args = _gps_only(6, el_deg=40.0)
+    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+                   Status.SINGULAR_GEOMETRY)
+    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    assert o.status == ref.SINGULAR_GEOMETRY
+
+
+def test_unmet_p_thresh_is_inf_with_status_5():
+    """GPS only with P_const = 1e-6 > P_thresh: the whole-GPS mode is singular (nothing left),
+    so P_nm >= 1e-6 > 6e-8: UNMONITORED_RISK, P_nm still reported."""
+    args = _gps_only(8, p_const_gps=1e-6)
+    res = araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1)
+    _assert_failed(res, Status.UNMONITORED_RISK)
+    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    assert o.status == ref.UNMONITORED_RISK
+    assert float(res.p_not_monitored) == pytest.approx(o.p_not_monitored, rel=1e-9)
+    assert float(res.p_not_monitored) > 1e-6
+
+
+def test_mixed_batch_failures_do_not_leak():
+    """A batch mixing OK, too-few, singular and unmet-P_thresh geometries: each row gets its own
+    status and the OK rows equal their single-geometry results."""
+    cases = [_gps_only(8), _gps_only(4), _gps_only(6, el_deg=40.0), _gps_only(8, p_const_gps=1e-6)]
+    stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
+    res = araim.protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
+    np.testing.assert_array_equal(np.asarray(res.status), [0, 1, 2, 5])
+    for k in res._fields:
+        assert not np.any(np.isnan(np.asarray(getattr(res, k), float))), k
+    one = araim.protection_levels(*cases[0][:-1], budget(), valid=cases[0][-1], max_order=1)
+    assert float(res.hpl_m[0]) == pytest.approx(float(one.hpl_m), abs=1e-9)
+    assert np.isinf(np.asarray(res.hpl_m[1:])).all()
+
+
+def test_bad_input_is_rejected_with_the_field_name():
+    args = list(_gps_only(8))
+    with pytest.raises(ValueError, match="var_int"):
+        araim.protection_levels(args[0], args[1], -args[2], *args[3:-1], budget(),
+                                valid=args[-1], max_order=1)
+    with pytest.raises(ValueError, match="p_sat"):
+        araim.protection_levels(*args[:5], args[5] + 1.5, args[6], budget(), valid=args[-1],
+                                max_order=1)
