@@ -230,21 +230,6 @@ def test_borderline_geometries_match_one_reading(random_batch):
     assert not failures, f"{len(failures)} mismatches:\n" + "\n".join(failures[:20])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "implementation (araim.mhss at 54ace1d, 10 Illinois iterations): status NOT_CONVERGED on "
-    "~0.5% of the random geometries whose PL equation has a mode with sigma_U ~1e3..1e4 m "
-    "(SOP-only subsets, VPL 1e4..6e4 m; e.g. seed 20261125 geometries 48, 183, 872, 1351); "
-    "the oracle's bisection gives a finite PL"))
-def test_pl_root_finder_converges_where_the_oracle_is_ok(random_batch):
-    """A fixed iteration count must still converge (status OK) wherever the PL exists."""
-    case, info, res, oracle = random_batch
-    stuck = [i for i in range(N_RANDOM) if int(res["status"][i]) == Status.NOT_CONVERGED
-             and oracle[i].status == ref.OK]
-    detail = [f"geometry {i} ({_describe(info, i)}): oracle PL_ENU {oracle[i].pl_enu_m}"
-              for i in stuck]
-    assert not stuck, f"{len(stuck)} not converged:\n" + "\n".join(detail[:20])
-
-
 def test_random_geometries_span_the_intended_cases(random_batch):
     """The random set really spans Table I: every order 1..3, OK and UNMONITORED_RISK statuses,
     one and two SOP constellations, Galileo on and off, SOP-fault modes with large priors."""
@@ -258,29 +243,67 @@ def test_random_geometries_span_the_intended_cases(random_batch):
     assert np.all(np.isfinite(res["hpl_m"][ok])) and np.all(np.isfinite(res["vpl_m"][ok]))
 
 
-def test_forced_order_one_matches_oracle():
+@pytest.fixture(scope="module")
+def order1_batch():
+    """200 further geometries with max_order = 1 forced (many need order 2 or 3)."""
+    case, info = random_cases(77, 200)
+    return case, info, run_jax(case, max_order=1), [run_ref(case, i, max_order=1)
+                                                    for i in range(200)]
+
+
+@pytest.fixture(scope="module")
+def lpv_batch():
+    """200 further geometries under the LPV-200 budget of the ADD."""
+    case, info = random_cases(78, 200)
+    bud = araim.BUDGET_LPV200
+    return case, info, run_jax(case, bud=bud), [run_ref(case, i, bud=bud) for i in range(200)]
+
+
+def _agreement_failures(batch):
+    case, info, res, oracle = batch
+    failures = []
+    for i, o in enumerate(oracle):
+        if o.borderline:
+            continue
+        bad = _mismatches(res, i, o)
+        if bad and bad != [NOT_CONVERGED]:
+            failures.append(f"geometry {i} ({_describe(info, i)}): {bad}")
+    return failures
+
+
+def test_forced_order_one_matches_oracle(order1_batch):
     """max_order = 1 on geometries that need more: order 1, P(more than one constellation
     faulty) counted unmonitored, status UNMONITORED_RISK where it exceeds P_thresh."""
-    n = 200
-    case, _ = random_cases(77, n)
-    res = run_jax(case, max_order=1)
+    _, _, res, _ = order1_batch
     assert_no_nan(res)
     assert np.all(res["order"] == 1)
     assert np.any(res["status"] == Status.UNMONITORED_RISK)
-    failures = [f"{i}: {b}" for i in range(n) if (b := compare(res, i, run_ref(case, i,
-                                                                                max_order=1)))]
+    failures = _agreement_failures(order1_batch)
     assert not failures, "\n".join(failures[:20])
 
 
-def test_lpv200_budget_matches_oracle():
+def test_lpv200_budget_matches_oracle(lpv_batch):
     """The other preset (LPV-200, ADD): different K_fa and PHMI split, same agreement."""
-    n = 200
-    case, _ = random_cases(78, n)
-    bud = araim.BUDGET_LPV200
-    res = run_jax(case, bud=bud)
-    failures = [f"{i}: {b}" for i in range(n)
-                if (b := compare(res, i, run_ref(case, i, bud=bud)))]
+    assert_no_nan(lpv_batch[2])
+    failures = _agreement_failures(lpv_batch)
     assert not failures, "\n".join(failures[:20])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "implementation: the fixed-count PL root finder reports NOT_CONVERGED where the PL exists. "
+    "At 06d4309 (8 Illinois iterations): 75/2000 Table I geometries, 1/200 forced order 1, "
+    "10/200 LPV-200 (at 54ace1d, 10 iterations: 10/2000). Benign ones too, e.g. seed 20261125 "
+    "geometry 1923: oracle PL_ENU (6.5, 5.4, 31.3) m, every mode sigma <= 4 m"))
+def test_pl_root_finder_converges_where_the_oracle_is_ok(random_batch, order1_batch, lpv_batch):
+    """A fixed iteration count must still converge (status OK) wherever the PL exists."""
+    detail = []
+    for name, (_, info, res, oracle) in (("table I", random_batch), ("order 1", order1_batch),
+                                        ("LPV-200", lpv_batch)):
+        for i, o in enumerate(oracle):
+            if int(res["status"][i]) == Status.NOT_CONVERGED and o.status == ref.OK:
+                detail.append(f"{name} geometry {i} ({_describe(info, i)}): oracle PL_ENU "
+                              f"{o.pl_enu_m}")
+    assert not detail, f"{len(detail)} not converged:\n" + "\n".join(detail[:30])
 
 
 # --------------------------------------------------------------------------- hand-derived cases
@@ -414,7 +437,7 @@ def test_pl_brackets_the_root_of_the_oracle_equation(random_batch):
     checked = 0
     for i in range(0, N_RANDOM, 5):
         o = oracle[i]
-        if o.status != ref.OK or o.borderline:
+        if o.status != ref.OK or o.borderline or res["status"][i] != Status.OK:
             continue
         for q in range(3):
             x = res["pl_enu_m"][i, q]
