@@ -12,6 +12,8 @@ import itertools
 import jax
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import araim
 from araim import Status
@@ -141,6 +143,35 @@ def test_toy_three_constellations_lowest_index_resolved():
     assert float(fm["p_no_fault"]) == pytest.approx(no_fault, rel=1e-13)
     assert float(fm["p_beyond_order"]) == 0.0
     assert sum(got.values()) + no_fault == pytest.approx(1.0, abs=1e-13)
+
+
+_probs = st.floats(0.0, 0.5, allow_nan=False, allow_subnormal=False)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(labels=st.lists(st.integers(0, 2), min_size=6, max_size=6),
+       valid=st.lists(st.booleans(), min_size=6, max_size=6),
+       p_sat=st.lists(_probs, min_size=6, max_size=6),
+       p_const=st.lists(_probs, min_size=3, max_size=3),
+       max_order=st.integers(1, 3))
+def test_grouping_matches_oracle_property(labels, valid, p_sat, p_const, max_order):
+    """Any labels, validity and probabilities (6 sources, 3 constellation slots, some absent):
+    the live modes, their priors, the order, P(no fault) and P(beyond r) equal the oracle's, and
+    priors + P(no fault) + P(beyond r) = 1."""
+    valid, labels = np.array(valid), np.array(labels)
+    p_sat, p_const = np.array(p_sat), np.array(p_const)
+    fm = _np(fault_modes(valid, labels, p_sat, p_const, P_THRESH, max_order))
+    o = ref.fault_mode_set(valid, labels, p_sat, p_const, P_THRESH, max_order)
+    got = _priors(fm)
+    want = {m.excluded: m.prior for m in o.modes}
+    assert set(got) == set(want)
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, rel=1e-12, abs=1e-300), sorted(k)
+    assert int(fm["order"]) == o.order
+    assert float(fm["p_no_fault"]) == pytest.approx(o.p_no_fault, rel=1e-12, abs=1e-300)
+    assert float(fm["p_beyond_order"]) == pytest.approx(o.p_beyond_order, rel=1e-12, abs=1e-300)
+    total = sum(got.values()) + float(fm["p_no_fault"]) + float(fm["p_beyond_order"])
+    assert total == pytest.approx(1.0, abs=1e-12)
 
 
 # --------------------------------------------------------------------------- identities

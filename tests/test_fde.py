@@ -247,3 +247,40 @@ def test_solution_separation_matches_oracle():
         checked += 1
     assert checked > 100
     assert 0 < np.mean(sep["detected"]) < 1
+
+
+# --------------------------------------------------------------------------- failures as data
+
+
+def test_failures_are_data_in_fde():
+    """Too few sources, singular and unmet-P_thresh geometries (rows 1..3) inside a batch of the
+    FDE cases (same compiled shape), with a 50 m error on the first satellite and NaN residuals
+    on padding rows: statuses 1, 2, 5 per row, never a NaN, inf PLs, no detection or exclusion
+    where there is no PL to protect."""
+    from tests.test_mhss import _gps_only
+
+    c, rng = fde_cases(306, N_FDE)
+    cases = [_gps_only(8), _gps_only(4), _gps_only(6, el_deg=40.0),
+             _gps_only(8, p_const_gps=1e-6)]
+    keys = ["g", "constellation", "var_int", "var_acc", "b_nom", "p_sat", "p_const", "valid"]
+    for i, case in enumerate(cases):
+        for k, v in zip(keys, case, strict=True):
+            if k == "p_const":
+                c[k][i] = v
+            else:
+                c[k][i] = 0
+                c[k][i, :8] = v
+    c["var_int"][:4, 8:] = c["var_acc"][:4, 8:] = 1.0
+    y = np.where(c["valid"], rng.normal(0.0, np.sqrt(c["var_acc"])), np.nan)
+    y[:4, 0] = 50.0
+    fde = _np(araim.detect_and_exclude(*_args(c, y), valid=c["valid"], max_order=1))
+    for k, v in fde.items():
+        assert not np.any(np.isnan(v.astype(float))), k
+    np.testing.assert_array_equal(fde["pl.status"][1:4], [1, 2, 5])
+    np.testing.assert_array_equal(fde["status"][1:4], [1, 2, 5])
+    assert np.all(np.isinf(fde["pl.hpl_m"][1:4])) and np.all(np.isinf(fde["pl.vpl_m"][1:4]))
+    assert not fde["detected"][1:4].any() and not fde["excluded"][1:4].any()
+    # row 0: a 50 m error on one of 8 satellites, as the oracle decides
+    o = ref.detect_and_exclude_reference(*_ref_args(c, 0, y[0]))
+    assert bool(fde["detected"][0]) == o.detected
+    np.testing.assert_array_equal(fde["excluded"][0], o.excluded)
