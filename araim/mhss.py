@@ -44,8 +44,8 @@ from araim.validate import check_int
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
 #: Illinois iterations. Measured on 65,536 geometries (9 GPS + 4 SOPs, Table I): 6 suffice for
-#: 1e-3 m, 7 give 1e-10 m; 8 leave a margin. Non-convergence is reported (NOT_CONVERGED).
-PL_ITERATIONS = 8
+#: 1e-3 m, 7 give 1e-10 m. Non-convergence is reported (NOT_CONVERGED).
+PL_ITERATIONS = 7
 _SQRT1_2 = 0.7071067811865476
 #: sigma_ss below this fraction of sigma^(0) is rounding noise: the mode's separation is zero
 ZERO_SEPARATION_RTOL = 1e-9

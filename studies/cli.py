@@ -158,8 +158,9 @@ def bench(
                   highlight=False)
     p = b.profile_mhss(batch=16_384 if quick else 65_536)
     res["mhss_profile"] = p
-    out.print(f"  profile: fault modes {p['fault_modes_s'] / p['total_s']:.0%}, projectors "
-              f"(eqs. 9-12) {p['projectors_s'] / p['total_s']:.0%}, PL root finding "
+    out.print(f"  profile ({p['cpu_us_per_pl']:.1f} CPU-us per PL): fault modes "
+              f"{p['fault_modes_s'] / p['total_s']:.0%}, projectors (eqs. 9-12) "
+              f"{p['projectors_s'] / p['total_s']:.0%}, PL root finding "
               f"{p['pl_root_finding_s'] / p['total_s']:.0%}", highlight=False)
     n3 = 100_000 if quick else 1_000_000
     res["fig3"] = b.bench_fig3(n3)
