@@ -290,10 +290,11 @@ def test_lpv200_budget_matches_oracle(lpv_batch):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "implementation: the fixed-count PL root finder reports NOT_CONVERGED where the PL exists. "
-    "At 06d4309 (8 Illinois iterations): 75/2000 Table I geometries, 1/200 forced order 1, "
-    "10/200 LPV-200 (at 54ace1d, 10 iterations: 10/2000). Benign ones too, e.g. seed 20261125 "
-    "geometry 1923: oracle PL_ENU (6.5, 5.4, 31.3) m, every mode sigma <= 4 m"))
+    "implementation: the fixed-count PL root finder reports NOT_CONVERGED where the PL exists "
+    "(the oracle's bisection finds it). Table I / forced order 1 / LPV-200 sets: 10/2000 at "
+    "54ace1d (10 iterations), 75/2000, 1/200, 10/200 at 06d4309 (8), 244/2000, 7/200, 18/200 at "
+    "68fa2a9 (7). Benign geometries too, e.g. seed 20261125 geometry 1923: oracle PL_ENU "
+    "(6.5, 5.4, 31.3) m, every mode sigma <= 4 m"))
 def test_pl_root_finder_converges_where_the_oracle_is_ok(random_batch, order1_batch, lpv_batch):
     """A fixed iteration count must still converge (status OK) wherever the PL exists."""
     detail = []
@@ -462,8 +463,11 @@ def _small_batch(seed=5):
 
 def test_padding_invariance_nan_and_inf_rows():
     """Extra invalid rows with NaN/inf geometry, NaN variances and probabilities, out-of-range
-    labels, anywhere in the row order, change nothing (same status, n_modes; PLs to 1e-9 m: the
-    order of floating sums may change with the row positions)."""
+    labels, anywhere in the row order, change nothing: same status, order, n_modes; sigma_acc_u
+    and P_nm to 1e-9 relative (the order of floating sums changes with the row positions), PLs
+    and EMT to 1e-6 m (the root finder stops at a bracket end within 1e-3 m of the root, so a
+    rounding-level change of its inputs can move that end by more than rounding, ~1e-8 m seen;
+    1e-6 m is still 1000x below the solver tolerance)."""
     case = _small_batch()
     base = run_jax(case)
     n, extra = case["g"].shape[0], 4
@@ -488,8 +492,10 @@ def test_padding_invariance_nan_and_inf_rows():
     assert_no_nan(out)
     for k in ("status", "order", "n_modes"):
         np.testing.assert_array_equal(out[k], base[k], err_msg=k)
-    for k in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m", "p_not_monitored"):
-        np.testing.assert_allclose(out[k], base[k], rtol=1e-9, atol=1e-9, err_msg=k)
+    for k in ("sigma_acc_u_m", "p_not_monitored"):
+        np.testing.assert_allclose(out[k], base[k], rtol=1e-9, atol=1e-18, err_msg=k)
+    for k in ("hpl_m", "vpl_m", "emt_m"):
+        np.testing.assert_allclose(out[k], base[k], rtol=0, atol=1e-6, err_msg=k)
 
 
 def test_absent_constellation_p_const_is_ignored():
