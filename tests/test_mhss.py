@@ -453,56 +453,57 @@ def test_pl_brackets_the_root_of_the_oracle_equation(random_batch):
 # --------------------------------------------------------------------------- invariances
 
 
-N_SMALL = 64  # one batch size for the small random tests: one compilation
+# These reuse the 2000-geometry batch: the kernel runs 2000 geometries in well under a second,
+# while every new batch shape costs a compilation of several seconds.
 
 
-def _small_batch(seed=5):
-    case, _ = random_cases(seed, N_SMALL)
-    return case
-
-
-def test_padding_invariance_nan_and_inf_rows():
-    """Extra invalid rows with NaN/inf geometry, NaN variances and probabilities, out-of-range
-    labels, anywhere in the row order, change nothing: same status, order, n_modes; sigma_acc_u
-    and P_nm to 1e-9 relative (the order of floating sums changes with the row positions), PLs
-    and EMT to 1e-6 m (the root finder stops at a bracket end within 1e-3 m of the root, so a
-    rounding-level change of its inputs can move that end by more than rounding, ~1e-8 m seen;
-    1e-6 m is still 1000x below the solver tolerance)."""
-    case = _small_batch()
-    base = run_jax(case)
-    n, extra = case["g"].shape[0], 4
-    rng = np.random.default_rng(11)
-    big = {}
+def _pad_with_junk(case, extra, perm_seed=None):
+    """Append `extra` invalid rows of NaN/inf geometry, NaN variances and probabilities and an
+    out-of-range label; with perm_seed, also shuffle every geometry's rows."""
+    n = case["g"].shape[0]
     junk = {"g": np.nan, "constellation": 99, "var_int": np.nan, "var_acc": np.inf,
             "b_nom": np.nan, "p_sat": np.nan, "valid": False}
+    big = {"p_const": case["p_const"]}
     for k, v in case.items():
-        if k == "p_const":
-            big[k] = v
-            continue
-        shape = (n, extra) + v.shape[2:]
-        big[k] = np.concatenate([v, np.full(shape, junk[k], dtype=v.dtype)], axis=1)
+        if k != "p_const":
+            shape = (n, extra) + v.shape[2:]
+            big[k] = np.concatenate([v, np.full(shape, junk[k], dtype=v.dtype)], axis=1)
     big["g"][:, L:, 0] = np.inf
-    perm = np.argsort(rng.random((n, L + extra)), axis=1)
-    for k in big:
-        if k == "p_const":
-            continue
-        p = perm if big[k].ndim == 2 else perm[..., None]
-        big[k] = np.take_along_axis(big[k], p, 1)
-    out = run_jax(big)
+    if perm_seed is not None:
+        perm = np.argsort(np.random.default_rng(perm_seed).random((n, L + extra)), axis=1)
+        for k in big:
+            if k != "p_const":
+                p = perm if big[k].ndim == 2 else perm[..., None]
+                big[k] = np.take_along_axis(big[k], p, 1)
+    return big
+
+
+@pytest.mark.parametrize("perm_seed", [None, 11], ids=["appended", "shuffled"])
+def test_padding_invariance_nan_and_inf_rows(random_batch, perm_seed):
+    """Extra invalid rows with NaN/inf geometry, NaN variances and probabilities and an
+    out-of-range label, appended after the valid rows or with every geometry's rows shuffled:
+    same status, order, n_modes; sigma_acc_u and P_nm to 1e-9 relative; PLs and EMT within the
+    solver tolerance 1e-3 m. Not bit-identical: another L is another compiled program (other
+    reduction lengths and orders: rounding differs), and the fixed-count root finder returns a
+    bracket end anywhere within 1e-3 m above the root, so a rounding-level change of its inputs
+    can move it inside that band (up to ~2e-5 m seen at 68fa2a9); most PLs agree to 1e-9 m."""
+    case, _, base, _ = random_batch
+    out = run_jax(_pad_with_junk(case, 4, perm_seed))
     assert_no_nan(out)
     for k in ("status", "order", "n_modes"):
         np.testing.assert_array_equal(out[k], base[k], err_msg=k)
     for k in ("sigma_acc_u_m", "p_not_monitored"):
         np.testing.assert_allclose(out[k], base[k], rtol=1e-9, atol=1e-18, err_msg=k)
     for k in ("hpl_m", "vpl_m", "emt_m"):
-        np.testing.assert_allclose(out[k], base[k], rtol=0, atol=1e-6, err_msg=k)
+        np.testing.assert_allclose(out[k], base[k], rtol=0, atol=1e-3, err_msg=k)
+    ok = base["status"] == Status.OK
+    assert np.mean(np.abs(out["vpl_m"][ok] - base["vpl_m"][ok]) <= 1e-9) > 0.95
 
 
-def test_absent_constellation_p_const_is_ignored():
+def test_absent_constellation_p_const_is_ignored(random_batch):
     """A constellation slot with no valid source has no clock and no P_const event: changing its
     P_const changes nothing (Galileo off, or an empty second SOP constellation)."""
-    case = _small_batch(seed=6)
-    base = run_jax(case)
+    case, _, base, _ = random_batch
     present = np.zeros((case["g"].shape[0], C), bool)
     for c in range(C):
         present[:, c] = np.any(case["valid"] & (case["constellation"] == c), axis=1)
@@ -533,9 +534,9 @@ def test_batch_shape_invariance():
                                        np.asarray(getattr(flat, k))[i], rtol=1e-12, err_msg=k)
 
 
-def test_broadcast_arguments():
+def test_broadcast_arguments(random_batch):
     """Scalars and per-constellation p_const broadcast over the batch like full arrays."""
-    case = _small_batch(seed=8)
+    case = random_batch[0]
     full = dict(case)
     full["b_nom"] = np.full_like(case["b_nom"], 0.75)
     a = run_jax(full)
