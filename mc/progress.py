@@ -60,3 +60,72 @@ class ProgressBar:
     @property
     def elapsed_s(self) -> float:
         return time.perf_counter() - self.t0
+
+
+class _CellsColumn(ProgressColumn):
+    def render(self, task):
+        return Text(f"{task.fields.get('cells_done', 0):,}/{task.fields.get('cells', 0):,} cells")
+
+
+class SweepProgress:
+    """One bar for a whole sweep: cells done / total, realizations per second and ETA (both
+    from the realizations still to compute: chunks reused by a resume count as done cells but
+    not towards the rate), then a final line. Output goes to stderr.
+
+    ``with SweepProgress(cells, todo_realizations, "label") as bar:
+    bar.advance(n, cells=k); bar.final_line("...")``. Disabled, it only counts.
+    """
+
+    def __init__(self, cells: int, realizations: int, description: str, enabled: bool = True):
+        self.cells = int(cells)
+        self.cells_finished = 0
+        self.realizations = int(realizations)
+        self.done = 0
+        self.enabled = enabled
+        self.t0 = time.perf_counter()
+        self._final = None
+        self._console = Console(stderr=True)
+        self._progress = None
+        if enabled:
+            self._progress = Progress(
+                TextColumn("{task.description}"), BarColumn(), _CellsColumn(), _RateColumn(),
+                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                console=self._console, transient=False,
+            )
+            self._task = self._progress.add_task(description, total=max(self.realizations, 1),
+                                                 cells=self.cells, cells_done=0)
+
+    def __enter__(self):
+        if self._progress is not None:
+            self._progress.start()
+        return self
+
+    def cells_done(self, n: int):
+        """Mark ``n`` more cells as finished (e.g. those a resume found complete)."""
+        self.cells_finished += int(n)
+        if self._progress is not None:
+            self._progress.update(self._task, cells_done=self.cells_finished)
+
+    def advance(self, realizations: int, cells: int = 0):
+        self.done += int(realizations)
+        self.cells_finished += int(cells)
+        if self._progress is not None:
+            self._progress.update(self._task, advance=int(realizations),
+                                  cells_done=self.cells_finished)
+
+    def final_line(self, text: str):
+        """Printed after the bar closes (only when enabled)."""
+        self._final = text
+
+    def __exit__(self, *exc):
+        if self._progress is not None:
+            if self.realizations == 0:  # everything reused: show a full bar
+                self._progress.update(self._task, completed=1)
+            self._progress.stop()
+            if self._final is not None and exc[0] is None:
+                self._console.print(self._final, highlight=False, soft_wrap=True)
+        return False
+
+    @property
+    def elapsed_s(self) -> float:
+        return time.perf_counter() - self.t0
