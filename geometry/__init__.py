@@ -40,3 +40,20 @@ __all__ = [
     "gps_24_slot", "gpstime", "load_navigation", "random_sky", "read_sem", "read_sp3",
     "read_yuma", "sky",
 ]
+
+from geometry import recording  # noqa: E402
+from geometry.recording import (  # noqa: E402
+    Recording,
+    RecordingError,
+    example_recording,
+    gnss_matrix,
+    load_recording,
+    pseudorange_matrix,
+    tower_clock_m,
+    write_recording,
+)
+
+__all__ += [
+    "Recording", "RecordingError", "example_recording", "gnss_matrix", "load_recording",
+    "pseudorange_matrix", "recording", "tower_clock_m", "write_recording",
+]
