@@ -2,7 +2,7 @@
 
 A sweep is the Cartesian product of named axes (e.g. number of SOPs x sigma_URA^S x P_s^S) with
 ``realizations`` Monte Carlo draws per cell. A study supplies a picklable ``kernel_factory``
-(``coords -> kernel``, ``kernel(keys) -> {name: (chunk,) array}``) and reducers that turn the
+(``coords -> kernel``, ``kernel(keys) -> {name: (batch,) array}``) and reducers that turn the
 per-realization outputs of each cell into statistics (``Mean``, ``Max``, ``Min``, ``Histogram``,
 ``Count``).
 
@@ -12,8 +12,12 @@ joined by ``;`` in name order. It depends on the axis values, not on grid indice
 gives the same draws whether the grid is full or narrowed from the CLI, and the cells that
 differ only in non-key axes share their draws (common random numbers).
 
-Bit-identity. The unit of work is a block of ``mc.reduce.BLOCK`` consecutive realizations; a
-chunk is a run of whole blocks. Floating means are stored as one sum per block (NumPy's sum of a
+Bit-identity. The kernel is always called with ``batch_size`` keys (default BLOCK = 1024) on
+batches aligned in realization index, so each realization's outputs come from the same compiled
+program at the same batch position whatever the chunking (XLA's fusion choices depend on the
+batch shape: another batch size may change the last bit, see ``kernel_outputs``). The unit of
+storage is a block of ``mc.reduce.BLOCK`` realizations; a chunk (one task, one file) is a run
+of whole blocks. Floating means are stored as one sum per block (NumPy's sum of a
 zero-padded block of BLOCK values, whatever the chunk) and combined with ``math.fsum``, which is
 correctly rounded and therefore independent of the order in which chunks finish. Counts, maxima,
 minima and histograms are exact. So a cell's statistics are bit-identical for any chunk size,
@@ -23,7 +27,7 @@ Storage (``out_dir``): ``sweep.json`` (the fingerprint of the run, written befor
 ``chunks/CELLHASH_B0_NBLOCKS.npz``, one file per finished (cell, chunk) with its partial sums,
 written atomically (temporary file, fsync, ``os.replace``). A killed run leaves only whole files;
 ``resume=True`` keeps them (even with a different chunk size: files cover block ranges) and
-computes only the missing blocks.
+computes only the missing blocks; a different fingerprint (or batch size) is refused.
 
 Non-finite values. NaN in an included realization is an error naming the kernel output (a bug
 upstream, DESIGN.md). ``+-inf`` is data (an unavailable geometry): ``Mean`` averages the finite
@@ -56,7 +60,7 @@ import xarray as xr
 
 from mc.keys import MAX_REALIZATIONS, realization_keys
 from mc.reduce import BLOCK
-from mc.runner import DEFAULT_CHUNK, ChunkPlan
+from mc.runner import DEFAULT_CHUNK
 
 FORMAT_VERSION = 1
 MANIFEST = "sweep.json"
@@ -353,17 +357,41 @@ def _worker_kernel(kernel_factory, factory_id, coords):
     return k
 
 
-def compute_chunk(kernel, coords, key_id, seed, b0, nblocks, realizations, chunk_size, reducers):
+def kernel_outputs(kernel, key_id, seed, start, n, batch_size):
+    """Outputs of realizations ``start .. start + n - 1`` of one cell, NumPy, each ``(n,)``.
+
+    The kernel is called with exactly ``batch_size`` keys per call, on batches aligned to
+    multiples of ``batch_size`` in realization index (the first and last may reach outside the
+    range and are trimmed). So realization i is always computed by the same compiled program at
+    the same position of its batch, whatever the chunk: XLA's fusion choices depend on the batch
+    shape, and a different batch size can change results in the last bit (measured: 121-292 of
+    1024 values of a sqrt + sin * exp kernel differ between batches of 1024, 2048 and 4096).
+    """
+    first = (start // batch_size) * batch_size
+    parts = []
+    for s in range(first, start + n, batch_size):
+        out = jax.device_get(kernel(realization_keys(seed, key_id, s, batch_size)))
+        for name, v in out.items():
+            v = np.asarray(v)
+            if v.ndim < 1 or v.shape[0] != batch_size:
+                raise ValueError(f"kernel output {name!r} must have shape ({batch_size},) for "
+                                 f"{batch_size} keys, got {v.shape}")
+        parts.append(out)
+    lo = start - first
+    return {name: np.concatenate([np.asarray(p[name]) for p in parts])[lo:lo + n]
+            for name in parts[0]}
+
+
+def compute_chunk(kernel, coords, key_id, seed, b0, nblocks, realizations, batch_size,
+                  reducers):
     """Partial statistics of blocks ``b0 .. b0 + nblocks - 1`` of one cell.
 
-    The kernel always sees ``chunk_size`` keys (realizations ``b0 * BLOCK`` onwards); outputs
-    past the cell's last realization or past the chunk's blocks are dropped.
-    Returns ``{"r{i}.{field}": array}`` over the reducers.
+    The kernel sees ``batch_size`` keys per call (``kernel_outputs``); outputs past the cell's
+    last realization are excluded. Returns ``{"r{i}.{field}": array}`` over the reducers.
     """
     start = b0 * BLOCK
-    keys = realization_keys(seed, key_id, start, chunk_size)
-    out = jax.device_get(kernel(keys))
     n = nblocks * BLOCK
+    out = kernel_outputs(kernel, key_id, seed, start, n, batch_size)
     valid = np.arange(start, start + n) < realizations
     ctx = f"cell {canonical(coords, coords)}, realizations {start}..{start + n - 1}"
     parts = {}
@@ -424,7 +452,8 @@ def _read_chunk(path: Path, meta: dict, reducers):
 def _normalized(obj):
     from mc.store import _jsonable
 
-    return json.loads(json.dumps(_jsonable(obj), sort_keys=True, allow_nan=False))
+    return json.loads(json.dumps(_jsonable(obj), sort_keys=True, allow_nan=False,
+                                 default=str))
 
 
 def _differences(old, new, prefix=""):
@@ -462,6 +491,7 @@ class SweepResult:
     out_dir: Path
     cells: int
     chunk_size: int
+    batch_size: int = BLOCK
     workers: int | None = None
     scheduler: str | None = None
     realizations_computed: int = 0
@@ -512,6 +542,10 @@ def _check_args(axes, realizations, reducers, key_axes, workers, scheduler):
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ValueError(f"scheduler must be an address such as tcp://HOST:8786, got "
                          f"{scheduler!r}")
+
+
+def _round_up(n, m):
+    return max(m, -(-n // m) * m)
 
 
 def _cells(axes, key_axes):
@@ -591,14 +625,15 @@ def _prepare_out_dir(out_dir: Path, manifest: dict, resume: bool):
 
 def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, seed: int,
               key_axes=(), out_dir, fingerprint: dict, chunk_size: int = DEFAULT_CHUNK,
-              resume: bool = False, workers: int | None = None, scheduler: str | None = None,
+              batch_size: int = BLOCK, resume: bool = False, workers: int | None = None,
+              scheduler: str | None = None,
               progress: bool = True, description: str = "",
               scheduler_timeout_s: float = 10.0) -> SweepResult:
     """Run every cell of the grid ``axes`` for ``realizations`` draws and reduce.
 
     Args:
       kernel_factory: picklable ``coords -> kernel`` (``coords``: dict axis name -> value);
-        ``kernel(keys)`` maps a ``(chunk_size,)`` key array to a dict of ``(chunk_size,)``
+        ``kernel(keys)`` maps a ``(batch_size,)`` key array to a dict of ``(batch_size,)``
         arrays. Built once per cell and process.
       axes: ``Axis`` objects, in grid order.
       realizations: draws per cell.
@@ -608,8 +643,12 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
       out_dir: folder for ``sweep.json`` and ``chunks/``.
       fingerprint: JSON-able dict of everything that determines the results; a resume must
         match it.
-      chunk_size: realizations per kernel call (rounded up to a multiple of BLOCK, capped at the
-        rounded-up ``realizations``). May change between a run and its resume.
+      chunk_size: realizations per task and chunk file (rounded up to a multiple of
+        ``batch_size``, capped at the rounded-up ``realizations``). It never changes a result,
+        and may change between a run and its resume.
+      batch_size: keys per kernel call, the one shape the kernel is compiled for (a multiple
+        of BLOCK). Part of the run's identity: XLA may round differently at another batch
+        size, so a resume must use the same.
       resume: keep the finished chunks of an earlier run with the same fingerprint and compute
         only the missing ones; without it, earlier chunk files in ``out_dir`` are deleted.
       workers: start a local Dask cluster of this many single-threaded worker processes.
@@ -624,7 +663,9 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     key_axes = tuple(key_axes)
     _check_args(axes, realizations, reducers, key_axes, workers, scheduler)
     realizations = int(realizations)
-    chunk_size = ChunkPlan(realizations, chunk_size).chunk_size
+    batch_size = _round_up(int(batch_size), BLOCK)
+    chunk_size = min(_round_up(int(chunk_size), batch_size),
+                     _round_up(realizations, batch_size))
     blocks_per_chunk = chunk_size // BLOCK
     n_blocks = -(-realizations // BLOCK)
     distributed = workers is not None or scheduler is not None
@@ -633,7 +674,8 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     shape, cells = _cells(axes, key_axes)
 
     engine = {"format": FORMAT_VERSION, "block": BLOCK, "seed": int(seed),
-              "realizations": realizations, "axes": {a.name: list(a.values) for a in axes},
+              "realizations": realizations, "batch_size": batch_size,
+              "axes": {a.name: list(a.values) for a in axes},
               "axis_order": [a.name for a in axes], "key_axes": sorted(key_axes),
               "reducers": [repr(r) for r in reducers]}
     manifest = {"fingerprint": _normalized(fingerprint), "engine": _normalized(engine)}
@@ -705,7 +747,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     def args_of(task):
         ci, b0, nb = task
         c = cells[ci]
-        return c.coords, c.key_id, int(seed), b0, nb, realizations, chunk_size, reducers
+        return c.coords, c.key_id, int(seed), b0, nb, realizations, batch_size, reducers
 
     with bar:
         if tasks and distributed:
@@ -729,6 +771,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
                        f"realizations, {len(tasks)} chunks computed ({where}), {reused} reused, "
                        f"{wall_s:.1f} s; chunk files in {chunk_dir}")
     return SweepResult(ds, len(tasks), reused, wall_s, out_dir, len(cells), chunk_size,
+                       batch_size=batch_size,
                        workers=workers, scheduler=scheduler, realizations_computed=todo_real)
 
 

@@ -37,6 +37,32 @@ def in_range(lo, hi):
     return lambda name, v: check_range(name, v, lo, hi)
 
 
+def axis(parse_one):
+    """Parser of a sweep axis parameter: ``"2,3,4"``, a scalar, or a list/tuple -> a non-empty
+    tuple of values without duplicates, each parsed by ``parse_one(name, v)`` (e.g.
+    ``count(1, 30)``, ``positive``, ``probability``). Errors name the key."""
+
+    def parse(name, v):
+        if isinstance(v, str):
+            items = [x.strip() for x in v.split(",")]
+            if any(not x for x in items):
+                raise ValueError(f"{name} takes comma-separated values such as 1,2,3; got "
+                                 f"{v!r} (an empty item)")
+        elif isinstance(v, list | tuple):
+            items = list(v)
+        else:
+            items = [v]
+        if not items:
+            raise ValueError(f"{name} needs at least one value")
+        vals = tuple(parse_one(name, x) for x in items)
+        for i, x in enumerate(vals):
+            if x in vals[:i]:
+                raise ValueError(f"{name} lists the value {x!r} twice; give each value once")
+        return vals
+
+    return parse
+
+
 @dataclass
 class StudyResult:
     dataset: Any  # xarray.Dataset
@@ -77,4 +103,61 @@ class Study:
 
     def plot(self, out_dir) -> list:
         raise NotImplementedError
+
+
+class SweepStudy(Study):
+    """A study that is a grid of cells (``mc.sweep``): resumable (``--resume``) and
+    distributable (``--workers``, ``--scheduler``).
+
+    Subclasses declare their axes as parameters parsed by ``axis(...)`` and list them in
+    ``axis_names`` (grid order); ``key_axes`` are the axes whose values change the random draws
+    (the others reuse them: common random numbers). They implement ``kernel`` (``coords ->
+    keys -> dict of (batch,) arrays``; the engine calls it with ``batch_size(params)`` keys,
+    1024 by default, whatever the chunk), ``reducers`` and ``finish`` (the reduced grid ->
+    ``StudyResult``). ``studies.execute.run_study`` runs them through ``mc.sweep.run_sweep``.
+    """
+
+    axis_names: tuple = ()
+    key_axes: tuple = ()
+    chunk_param: str = "chunk"  # the parameter giving realizations per task / chunk file
+
+    def axes(self, params) -> tuple:
+        from mc.sweep import Axis
+
+        return tuple(Axis(k, tuple(params[k])) for k in self.axis_names)
+
+    def kernel(self, params, coords):
+        raise NotImplementedError
+
+    def reducers(self, params) -> tuple:
+        raise NotImplementedError
+
+    def finish(self, params, dataset, realizations, seed) -> StudyResult:
+        raise NotImplementedError
+
+    def chunk_size(self, params) -> int:
+        """Realizations per task and chunk file (never changes a result)."""
+        from mc.runner import DEFAULT_CHUNK
+
+        return int(params.get(self.chunk_param, DEFAULT_CHUNK))
+
+    def batch_size(self, params) -> int:
+        """Keys per kernel call, the one shape the kernel is compiled for (a multiple of
+        mc.reduce.BLOCK). XLA may round differently at another batch shape, so this is part of
+        a run's identity (a resume must use the same). Override for bigger calls."""
+        from mc.reduce import BLOCK
+
+        return BLOCK
+
+    def run(self, params, realizations, seed, progress=None) -> StudyResult:
+        """Convenience for tests and notebooks: the whole sweep in this process, its chunk files
+        in a temporary folder that is deleted afterwards (``progress`` is ignored). The command
+        line goes through ``studies.execute.run_study`` instead (resume, Dask, output folder)."""
+        import tempfile
+
+        from studies.execute import run_sweep_study
+
+        with tempfile.TemporaryDirectory(prefix="oaraim-sweep-") as tmp:
+            result, _ = run_sweep_study(self, params, realizations, seed, tmp, progress=False)
+        return result
 

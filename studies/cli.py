@@ -50,6 +50,13 @@ def run(
     set_: Annotated[list[str] | None, typer.Option("--set", help="KEY=VALUE parameter")] = None,
     quick: Annotated[bool, typer.Option(help="use the study's quick size")] = False,
     progress: Annotated[bool, typer.Option(help="show a progress bar on stderr")] = True,
+    workers: Annotated[int | None, typer.Option(
+        help="sweep studies: run on a local Dask cluster of N worker processes")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        help="sweep studies: run on an existing Dask scheduler (tcp://HOST:PORT)")] = None,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="sweep studies: keep the finished chunks in OUT/STUDY, compute the "
+        "rest")] = False,
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
     from studies.execute import run_study
@@ -57,7 +64,8 @@ def run(
     try:
         summary, sdir, figures, wall = run_study(study, realizations=realizations, seed=seed,
                                                  out=out_dir, sets=set_, quick=quick,
-                                                 show_progress=progress)
+                                                 show_progress=progress, resume=resume,
+                                                 workers=workers, scheduler=scheduler)
     except ValueError as e:
         _fail(str(e))
     _print_rows(summary)
@@ -186,5 +194,5 @@ def main():
     try:
         app()
     except KeyboardInterrupt:
-        err.print("interrupted")
+        err.print("interrupted (a sweep keeps its finished chunks: rerun with --resume)")
         sys.exit(130)

@@ -1,11 +1,15 @@
 """Run one study end to end: validate, compute, store, plot."""
 
+import functools
 import time
 from pathlib import Path
 
 from mc.progress import ProgressBar
 from mc.store import provenance, write_results
-from studies.registry import get_study
+from studies.base import SweepStudy
+from studies.registry import STUDIES, get_study
+
+SWEEP_FLAGS = "--resume, --workers and --scheduler"
 
 
 def parse_sets(sets):
@@ -20,10 +24,64 @@ def parse_sets(sets):
     return out
 
 
+def sweep_kernel(study, params, coords):
+    """Kernel factory of a sweep study, picklable for Dask workers: ``study`` is the name of a
+    registered study (looked up in ``studies.registry`` in the worker) or a study object (one
+    defined outside ``studies/``, e.g. in a test; it travels pickled)."""
+    s = get_study(study) if isinstance(study, str) else study
+    return s.kernel(params, coords)
+
+
+def _study_ref(study):
+    """The study's name where every worker finds it in the registry, else the object."""
+    registered = STUDIES.get(study.name) is study
+    return study.name if registered and type(study).__module__.startswith("studies.") else study
+
+
+def sweep_fingerprint(study, params, realizations, seed):
+    """What determines a sweep's results (stored in OUT/STUDY/sweep.json; a resume must match).
+    The chunk size is left out: results do not depend on it and a resume may change it."""
+    return {"study": study.name,
+            "params": {k: v for k, v in params.items() if k != study.chunk_param},
+            "seed": int(seed), "realizations": int(realizations)}
+
+
+def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False, workers=None,
+                    scheduler=None, progress=True):
+    """Run a ``SweepStudy`` through ``mc.sweep.run_sweep`` into ``out_dir`` (its chunks and
+    sweep.json); returns (StudyResult from ``study.finish``, SweepResult)."""
+    from mc.sweep import run_sweep
+
+    sweep = run_sweep(
+        functools.partial(sweep_kernel, _study_ref(study), params), study.axes(params),
+        realizations, study.reducers(params), seed=seed, key_axes=study.key_axes,
+        out_dir=out_dir, fingerprint=sweep_fingerprint(study, params, realizations, seed),
+        chunk_size=study.chunk_size(params), batch_size=study.batch_size(params),
+        resume=resume, workers=workers, scheduler=scheduler, progress=progress,
+        description=study.name)
+    return study.finish(params, sweep.dataset, realizations, seed), sweep
+
+
+def _check_sweep_flags(study, resume, workers, scheduler):
+    if not isinstance(study, SweepStudy):
+        if resume or workers is not None or scheduler is not None:
+            sweeps = [n for n, s in STUDIES.items() if isinstance(s, SweepStudy)]
+            raise ValueError(f"{SWEEP_FLAGS} apply to sweep studies only and {study.name} is not "
+                             "one; sweep studies: " + (", ".join(sweeps) or "none registered"))
+        return
+    if workers is not None and scheduler is not None:
+        raise ValueError("give either --workers N (a local Dask cluster) or --scheduler ADDRESS "
+                         "(an existing one), not both")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+
+
 def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=False,
-              show_progress=True):
-    """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder)."""
+              show_progress=True, resume=False, workers=None, scheduler=None):
+    """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder, figure
+    paths, wall time in s). Sweep studies also take ``resume``, ``workers``, ``scheduler``."""
     study = get_study(name)
+    _check_sweep_flags(study, resume, workers, scheduler)
     params = study.validate(parse_sets(sets))
     if realizations is None:
         realizations = study.quick_realizations if quick else study.default_realizations
@@ -31,14 +89,39 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
         raise ValueError(f"--realizations must be >= 1, got {realizations}")
     out_dir = Path(out) / study.name
     t0 = time.perf_counter()
-    with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
-        result = study.run(params, realizations, seed, bar)
+    extra = {}
+    if isinstance(study, SweepStudy):
+        result, sweep = run_sweep_study(study, params, realizations, seed, out_dir,
+                                        resume=resume, workers=workers, scheduler=scheduler,
+                                        progress=show_progress)
+        extra["sweep"] = _sweep_provenance(sweep, resume)
+    else:
+        with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
+            result = study.run(params, realizations, seed, bar)
     wall_s = time.perf_counter() - t0
     summary = {"study": study.name, "title": study.title, "rows": result.rows,
                "metrics": result.metrics}
     prov = provenance(study.name, params, seed, realizations, wall_s,
                       realization=study.realization, seed_paper=study.seed_file,
-                      **result.extra_provenance)
+                      **extra, **result.extra_provenance)
     write_results(out_dir, result.dataset, summary, prov)
     figures = study.plot(out_dir)
     return summary, out_dir, figures, wall_s
+
+
+def _sweep_provenance(sweep, resume):
+    import importlib.metadata
+
+    def version(pkg):
+        try:
+            return importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {"cells": sweep.cells, "chunk_size": sweep.chunk_size, "batch_size": sweep.batch_size,
+            "chunks_computed": sweep.chunks_computed, "chunks_reused": sweep.chunks_reused,
+            "realizations_computed": sweep.realizations_computed, "resumed": bool(resume),
+            "workers": sweep.workers, "scheduler": sweep.scheduler,
+            "sweep_wall_time_s": sweep.wall_s,
+            "dask": version("dask"), "distributed": version("distributed"),
+            "chunk_files": str(Path(sweep.out_dir) / "chunks")}

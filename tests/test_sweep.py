@@ -1,0 +1,340 @@
+"""mc.sweep: per-cell results bit-identical for any chunking, cell order, grid narrowing and
+resume; reducers against plain NumPy on the raw per-realization outputs."""
+
+import functools
+import json
+import math
+import sys
+import warnings
+import zlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import xarray as xr
+
+from mc.keys import realization_keys
+from mc.reduce import BLOCK
+from mc.sweep import (
+    Axis,
+    Count,
+    Histogram,
+    Max,
+    Mean,
+    Min,
+    cell_key_id,
+    run_sweep,
+)
+
+EDGES = tuple(np.linspace(-2.0, 2.0, 9))
+REDUCERS = (Mean("r", where="pos"), Mean("r_inf"), Max("r"), Max("r_inf"), Min("x0"),
+            Histogram("x0", EDGES), Count("pos"), Count("big", where="pos"))
+AXES = (Axis("a", (1, 2, 3)), Axis("b", (0.5, 1.0)))
+
+
+@jax.jit
+def toy_kernel(keys, a, b):
+    """Per realization: 3 standard normals and something nonlinear of them; ``r_inf`` is inf
+    for about 7 % of realizations (an 'unavailable' result)."""
+    x = jax.vmap(lambda k: jax.random.normal(k, (3,)))(keys)
+    r = a * jnp.sqrt(jnp.sum(x * x, axis=-1)) + b * jnp.sin(3.0 * x[:, 0]) * jnp.exp(x[:, 2])
+    return {"r": r, "x0": x[:, 0], "pos": x[:, 1] > 0.0, "big": r > 2.0,
+            "r_inf": jnp.where(x[:, 2] > 1.5, jnp.inf, r)}
+
+
+def toy_factory(coords):
+    return functools.partial(toy_kernel, a=float(coords["a"]), b=float(coords["b"]))
+
+
+def _run(tmp_path, name="out", axes=AXES, n=5000, chunk=2048, key_axes=("a",), **kw):
+    kw.setdefault("fingerprint", {"toy": 1})
+    return run_sweep(toy_factory, axes, n, kw.pop("reducers", REDUCERS), seed=kw.pop("seed", 3),
+                     key_axes=key_axes, out_dir=tmp_path / name, chunk_size=chunk,
+                     progress=False, **kw)
+
+
+def _assert_cells_equal(ds_a, ds_b, **cell):
+    """Every variable of one cell bit-identical in two datasets."""
+    for var in ds_a.data_vars:
+        a, b = ds_a[var].sel(**cell).values, ds_b[var].sel(**cell).values
+        assert np.array_equal(a, b), (var, cell, a, b)
+
+
+def _raw(coords, n, seed=3, key_axes=("a",)):
+    """Per-realization outputs of one cell, computed as the engine does (batches of 1024)."""
+    keys = realization_keys(seed, cell_key_id(coords, key_axes), 0, -(-n // BLOCK) * BLOCK)
+    out = [toy_factory(coords)(keys[s:s + BLOCK]) for s in range(0, keys.shape[0], BLOCK)]
+    return {k: np.concatenate([np.asarray(o[k]) for o in out])[:n] for k in out[0]}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    return _run(tmp_path_factory.mktemp("ref"), chunk=2048)
+
+
+def test_reducers_against_numpy_on_raw_outputs(reference):
+    ds = reference.dataset
+    assert ds["r_mean"].dims == ("a", "b") and ds["x0_hist"].dims == ("a", "b", "x0_bin")
+    assert ds.attrs["realizations"] == 5000 and ds.attrs["seed"] == 3
+    np.testing.assert_array_equal(ds["x0_bin_lo"].values, EDGES[:-1])
+    for a in (1, 2, 3):
+        for b in (0.5, 1.0):
+            o = _raw({"a": a, "b": b}, 5000)
+            cell = ds.sel(a=a, b=b)
+            pos = o["pos"]
+            assert cell["r_count"] == pos.sum()
+            assert cell["r_mean"] == pytest.approx(np.mean(o["r"][pos]), rel=1e-13)
+            fin = np.isfinite(o["r_inf"])
+            assert 0 < (~fin).sum() < 1000
+            assert cell["r_inf_count"] == fin.sum()  # Mean skips inf and says how many it kept
+            assert cell["r_inf_mean"] == pytest.approx(np.mean(o["r_inf"][fin]), rel=1e-13)
+            assert cell["r_max"] == o["r"].max() and cell["r_inf_max"] == np.inf
+            assert cell["x0_min"] == o["x0"].min()
+            counts, _ = np.histogram(o["x0"], EDGES)
+            np.testing.assert_array_equal(cell["x0_hist"].values, counts)
+            assert cell["x0_outside"] == 5000 - counts.sum()
+            assert cell["pos_count"] == pos.sum()
+            assert cell["big_count"] == (o["big"] & pos).sum()
+
+
+def _hand_factory(coords):
+    """Three realizations by hand; the padding of the chunk holds NaN, which must never count."""
+    def kernel(keys):
+        n = keys.shape[0]
+        v = np.full(n, np.nan)
+        v[:3] = [1.0, 5.0, -2.0]
+        w = np.zeros(n, bool)
+        w[[0, 2]] = True
+        return {"v": v, "w": w}
+    return kernel
+
+
+def test_reducers_hand_case_ignore_padding(tmp_path):
+    reducers = (Mean("v", where="w"), Max("v"), Min("v"), Histogram("v", (0.0, 2.0, 6.0)),
+                Count("w"))
+    res = run_sweep(_hand_factory, (Axis("k", (0,)),), 3, reducers, seed=0, out_dir=tmp_path,
+                    fingerprint={}, progress=False)
+    c = res.dataset.sel(k=0)
+    assert c["v_mean"] == -0.5 and c["v_count"] == 2
+    assert c["v_max"] == 5.0 and c["v_min"] == -2.0
+    np.testing.assert_array_equal(c["v_hist"].values, [1, 1])
+    assert c["v_outside"] == 1 and c["w_count"] == 2
+    res = run_sweep(_hand_factory, (Axis("k", (0,)),), 3, (Max("v", where="w"),
+                    Min("v", where="w")), seed=0, out_dir=tmp_path, fingerprint={},
+                    progress=False)
+    assert res.dataset["v_max"].item() == 1.0 and res.dataset["v_min"].item() == -2.0
+
+
+def _empty_where_factory(coords):
+    return lambda keys: {"v": np.ones(keys.shape[0]), "w": np.zeros(keys.shape[0], bool)}
+
+
+def test_reducers_with_nothing_included(tmp_path):
+    res = run_sweep(_empty_where_factory, (Axis("k", (0,)),), 10,
+                    (Mean("v", where="w"), Max("v", where="w"), Min("v", where="w"),
+                     Histogram("v", (0.0, 2.0), where="w")), seed=0, out_dir=tmp_path,
+                    fingerprint={}, progress=False)
+    c = res.dataset.sel(k=0)
+    assert np.isnan(c["v_mean"]) and c["v_count"] == 0
+    assert c["v_max"] == -np.inf and c["v_min"] == np.inf
+    assert c["v_hist"].sum() == 0 and c["v_outside"] == 0
+
+
+def _nan_factory(coords):
+    def kernel(keys):
+        v = np.ones(keys.shape[0])
+        v[1] = np.nan
+        return {"v": v, "w": np.arange(keys.shape[0]) != 1}
+    return kernel
+
+
+def test_nan_in_an_included_realization_is_an_error_naming_the_output(tmp_path):
+    with pytest.raises(FloatingPointError, match="'v'.*NaN"):
+        run_sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v"),), seed=0,
+                  out_dir=tmp_path, fingerprint={}, progress=False)
+    res = run_sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v", where="w"),), seed=0,
+                    out_dir=tmp_path, fingerprint={}, progress=False)
+    assert res.dataset["v_mean"].item() == 1.0 and res.dataset["v_count"].item() == 9
+
+
+@pytest.mark.parametrize("chunk", [1024, 3072, 8192])
+def test_bit_identical_for_any_chunk_size(tmp_path, reference, chunk):
+    res = _run(tmp_path, chunk=chunk)
+    xr.testing.assert_identical(res.dataset, reference.dataset)
+    assert res.chunk_size == min(chunk, 5 * BLOCK)
+
+
+def test_bit_identical_for_any_chunk_size_at_a_bigger_batch(tmp_path):
+    ref = _run(tmp_path, "ref", chunk=2048, batch_size=2048)
+    for chunk in (4096, 6144):
+        xr.testing.assert_identical(_run(tmp_path, chunk=chunk, batch_size=2048).dataset,
+                                    ref.dataset)
+
+
+def test_one_cell_alone_and_any_cell_order_give_the_same_cell(tmp_path, reference):
+    alone = _run(tmp_path, "alone", axes=(Axis("a", (2,)), Axis("b", (1.0,))))
+    _assert_cells_equal(alone.dataset, reference.dataset, a=2, b=1.0)
+    shuffled = _run(tmp_path, "shuffled", axes=(Axis("a", (3, 1, 2)), Axis("b", (1.0, 0.5))))
+    for a in (1, 2, 3):
+        for b in (0.5, 1.0):
+            _assert_cells_equal(shuffled.dataset, reference.dataset, a=a, b=b)
+    swapped = _run(tmp_path, "swapped", axes=(Axis("b", (0.5, 1.0)), Axis("a", (1, 2, 3))))
+    assert swapped.dataset["r_mean"].dims == ("b", "a")
+    xr.testing.assert_identical(swapped.dataset.transpose("a", "b", "x0_bin"),
+                                reference.dataset)
+
+
+def test_key_axes_change_the_draws_and_other_axes_share_them(tmp_path, reference):
+    ds = reference.dataset  # key_axes = ("a",): cells with the same a share their draws
+    assert cell_key_id({"a": 2, "b": 0.5}, ["a"]) == zlib.crc32(b"a=2")
+    assert cell_key_id({"a": 2, "b": 0.5}, ["b", "a"]) == zlib.crc32(b"a=2;b=0.5")
+    for a in (1, 2, 3):  # x0 and pos do not depend on b: identical across b
+        cell = ds.sel(a=a)
+        for var in ("x0_min", "x0_hist", "pos_count"):
+            assert np.array_equal(cell[var].sel(b=0.5).values, cell[var].sel(b=1.0).values)
+    assert len(set(ds["x0_min"].sel(b=0.5).values.tolist())) == 3  # a changes the draws
+    both = _run(tmp_path, key_axes=("a", "b"))
+    assert both.dataset["x0_min"].sel(a=1, b=0.5) != both.dataset["x0_min"].sel(a=1, b=1.0)
+    # no key axis at all: every cell shares one set of draws
+    none = _run(tmp_path, "none", key_axes=())
+    assert len(set(none.dataset["x0_min"].values.ravel().tolist())) == 1
+
+
+_CALLS = []
+
+
+def _recording_factory(coords):
+    _CALLS.append(("factory", coords["a"]))
+    k = toy_factory(coords)
+
+    def kernel(keys):
+        _CALLS.append(("call", keys.shape))
+        return k(keys)
+    return kernel
+
+
+def test_kernel_built_once_per_cell_and_always_sees_batch_size_keys(tmp_path):
+    _CALLS.clear()
+    run_sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
+              out_dir=tmp_path, fingerprint={}, chunk_size=2048, progress=False)
+    assert sorted(c for c in _CALLS if c[0] == "factory") == [("factory", a) for a in
+                                                               (1, 1, 2, 2, 3, 3)]
+    assert {c for c in _CALLS if c[0] == "call"} == {("call", (1024,))}  # default batch
+    assert sum(c[0] == "call" for c in _CALLS) == 6 * 3  # 2500 -> 3 padded batches
+    _CALLS.clear()
+    res = run_sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
+                    out_dir=tmp_path, fingerprint={}, chunk_size=1024, batch_size=2048,
+                    progress=False)
+    assert res.chunk_size == 2048 and res.batch_size == 2048  # chunks hold whole batches
+    assert {c for c in _CALLS if c[0] == "call"} == {("call", (2048,))}
+    assert sum(c[0] == "call" for c in _CALLS) == 6 * 2
+
+
+def _chunk_files(out):
+    return sorted((out / "chunks").glob("*.npz"))
+
+
+def test_resume_recomputes_only_missing_chunks_even_with_another_chunk_size(tmp_path,
+                                                                              reference):
+    first = _run(tmp_path, chunk=1024)
+    files = _chunk_files(tmp_path / "out")
+    assert first.chunks_computed == len(files) == 6 * 5 and first.chunks_reused == 0
+    for f in files[::3]:  # "killed": ten chunks never written
+        f.unlink()
+    again = _run(tmp_path, chunk=2048, resume=True)
+    assert again.chunks_reused == 20 and 0 < again.chunks_computed < 30
+    xr.testing.assert_identical(again.dataset, reference.dataset)
+    done = _run(tmp_path, chunk=4096, resume=True)  # nothing left to do
+    assert done.chunks_computed == 0
+    xr.testing.assert_identical(done.dataset, reference.dataset)
+
+
+def test_resume_recomputes_a_damaged_chunk_file(tmp_path, reference):
+    _run(tmp_path)
+    victim = _chunk_files(tmp_path / "out")[4]
+    victim.write_bytes(victim.read_bytes()[:100])  # cannot happen with atomic writes; still safe
+    (tmp_path / "out" / "chunks" / ".stray.npz.123.tmp").write_bytes(b"half")
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = _run(tmp_path, resume=True)
+    assert any("unreadable chunk" in str(x.message) for x in w)
+    assert res.chunks_computed == 1
+    assert not list((tmp_path / "out" / "chunks").glob("*.tmp"))
+    xr.testing.assert_identical(res.dataset, reference.dataset)
+
+
+def test_resume_with_other_parameters_refuses_and_says_why(tmp_path):
+    _run(tmp_path, fingerprint={"study": "toy", "params": {"sigma": 1.0}})
+    with pytest.raises(ValueError, match=r"params\.sigma.*--out.*--resume"):
+        _run(tmp_path, fingerprint={"study": "toy", "params": {"sigma": 2.0}}, resume=True)
+    with pytest.raises(ValueError, match="realizations"):
+        _run(tmp_path, n=6000, fingerprint={"study": "toy", "params": {"sigma": 1.0}},
+             resume=True)
+    with pytest.raises(ValueError, match="axes"):
+        _run(tmp_path, axes=(Axis("a", (1,)), Axis("b", (0.5,))),
+             fingerprint={"study": "toy", "params": {"sigma": 1.0}}, resume=True)
+    with pytest.raises(ValueError, match="batch_size"):
+        _run(tmp_path, batch_size=2048, fingerprint={"study": "toy", "params": {"sigma": 1.0}},
+             resume=True)
+    # without --resume a different run starts afresh and clears the old chunk files
+    res = _run(tmp_path, n=1000, fingerprint={"study": "toy", "params": {"sigma": 2.0}})
+    assert len(_chunk_files(tmp_path / "out")) == res.chunks_computed == 6
+    manifest = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    assert manifest["fingerprint"]["params"]["sigma"] == 2.0
+    # resume with no earlier run just runs
+    fresh = _run(tmp_path, "fresh", n=1000, resume=True)
+    assert fresh.chunks_computed == 6 and fresh.chunks_reused == 0
+
+
+def test_fresh_run_ignores_results_of_an_earlier_run(tmp_path, reference):
+    _run(tmp_path, seed=99)
+    res = _run(tmp_path)  # same folder, other seed, no resume
+    assert res.chunks_reused == 0
+    xr.testing.assert_identical(res.dataset, reference.dataset)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(axes=(Axis("a", (1,)), Axis("a", (2,)))), "declared twice"),
+    (dict(key_axes=("c",)), "key axis 'c'"),
+    (dict(n=0), "realizations"),
+    (dict(workers=0), "workers"),
+    (dict(workers=2, scheduler="tcp://127.0.0.1:1"), "not both"),
+    (dict(reducers=(Mean("r"), Mean("r"))), "both produce"),
+    (dict(reducers=()), "at least one reducer"),
+    (dict(scheduler="tcp://127.0.0.1:1"), "cannot reach the Dask scheduler"),
+    (dict(scheduler="no-port-here"), "cannot reach the Dask scheduler"),
+])
+def test_bad_arguments_are_clear_errors(tmp_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        _run(tmp_path, **kwargs)
+
+
+def test_axis_values_are_checked():
+    assert Axis("a", np.array([1, 2])).values == (1, 2)
+    assert type(Axis("a", (np.float64(0.5),)).values[0]) is float
+    assert Axis("s", "x").values == ("x",)
+    with pytest.raises(ValueError, match="twice"):
+        Axis("a", (1, 1.0))
+    with pytest.raises(ValueError, match="at least one"):
+        Axis("a", ())
+    with pytest.raises(ValueError, match="NaN"):
+        Axis("a", (math.nan,))
+
+
+def test_missing_kernel_output_is_named(tmp_path):
+    with pytest.raises(KeyError, match="'nope'.*r_inf"):
+        _run(tmp_path, reducers=(Mean("nope"),))
+
+
+def test_in_process_run_never_imports_distributed(reference):
+    # this test process may have started a cluster elsewhere; check a fresh interpreter
+    import subprocess
+
+    code = ("import sys, tests.test_sweep as t, pathlib, tempfile; "
+            "d = pathlib.Path(tempfile.mkdtemp()); t._run(d, n=1000); "
+            "print('distributed' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, cwd=str(__import__("pathlib").Path(__file__).parents[1]))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "False"
