@@ -30,15 +30,21 @@ def _fail(msg: str):
 @app.command("list")
 def list_studies():
     """List the studies with their parameters and defaults."""
+    from studies.base import SweepStudy
     from studies.registry import STUDIES
 
     for name, s in STUDIES.items():
         out.print(f"[bold]{name}[/]  {s.title}", highlight=False)
         out.print(f"  one realization: {s.realization}; default {s.default_realizations:,}, "
                   f"quick {s.quick_realizations:,}", highlight=False)
+        if isinstance(s, SweepStudy):
+            out.print(f"  sweep over {' x '.join(s.axis_names)} (--resume, --workers N, "
+                      "--scheduler ADDRESS); realizations are per cell", highlight=False)
         for key, p in s.params.items():
             unit = f" {p.unit}" if p.unit else ""
-            out.print(f"    --set {key}={p.default}{unit}  {p.doc}", highlight=False)
+            default = (",".join(str(v) for v in p.default) if isinstance(p.default, tuple)
+                       else p.default)
+            out.print(f"    --set {key}={default}{unit}  {p.doc}", highlight=False)
 
 
 @app.command()

@@ -103,7 +103,7 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
                "metrics": result.metrics}
     prov = provenance(study.name, params, seed, realizations, wall_s,
                       realization=study.realization, seed_paper=study.seed_file,
-                      **extra, **result.extra_provenance)
+                      **{**result.extra_provenance, **extra})
     write_results(out_dir, result.dataset, summary, prov)
     figures = study.plot(out_dir)
     return summary, out_dir, figures, wall_s
