@@ -3,8 +3,12 @@
 from studies.seed001_fig3 import Fig3Elevation
 from studies.seed001_fig4 import Fig4HplCdf
 from studies.seed001_fig5 import Fig5Madrid24h
+from studies.seed004_fig3 import Fig3OneSop
+from studies.seed004_fig4 import Fig4HplMaps
+from studies.seed004_theorems import Theorems
 
-STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h())}
+STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
+                                Fig4HplMaps(), Theorems())}
 
 
 def get_study(name):

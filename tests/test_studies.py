@@ -103,7 +103,10 @@ def test_fig4_sop_curve_dominates(fig4_50k):
 
 #: per-study overrides that keep the generic tests small: a Fig. 5 realization is a tower draw at
 #: each of 2880 epochs, so a 1 h span (120 epochs) keeps the same code paths at 1/24 the cost
-SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"}}
+SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
+         "seed004-fig3-one-sop": {"p_s_sop": "1e-5,1e-1"},
+         "seed004-fig4-hpl-maps": {"n_sops": "2,8", "p_s_sop": "1e-4", "sigma_ura_sop_m": "1,20"},
+         "seed004-theorems": {"n_gps": "5,9"}}
 
 
 @pytest.mark.parametrize("name", list(STUDIES))

@@ -1,0 +1,205 @@
+"""What the seed 004 sweep studies share: the Orange County receiver, its GPS sky, Table I.
+
+Seed 004 section VI: "a stationary receiver located in Orange County, California ... fixed at
+r_r = 1e6 x [-2.482345, -4.700049, 3.513616] (ECEF)" (33.64 N, 117.84 W, ~ 27 m), "the
+geometric distribution of GPS satellites is varied by randomizing the time ... uniformly span
+time of a day"; SOPs by BPP (section III-D); Table I integrity constants.
+
+GPS sky (DESIGN.md, default sky): the broadcast file ``nav/brdc0010.22n`` (IGS merged GPS
+navigation of 2022-01-01, 31 satellites) from OARAIM_DATA when present, else the built-in SPS
+24-slot constellation with a warning; ``sky_source`` in the summary and provenance says which.
+The sky is tabulated once per run at ``sky_step_s`` (10 s) over the file's day and a
+realization draws its epoch uniformly from that table: a GPS satellite moves at most ~0.02 deg
+in 10 s as seen from the ground, so a 10 s grid over 86,400 s is as good as continuous time
+here, and the table is shared by every cell.
+
+Choices the seed leaves open (DESIGN.md "silent"; stated, exposed as parameters, with one
+sensitivity run in results/):
+  * GPS elevation mask 5 deg: ARAIM practice (WG-C ADD); the UAV experiment used 15 deg.
+  * BPP annulus d in [5 m, 3 km]: seed 001's values for the same authors' BPP (far field of
+    an LTE antenna; reliable LTE tracking range); tower heights above the receiver uniform in
+    [0, 50] m (macro-cell antennas 15-50 m above a receiver on the ground; 0 m gives seed 001's
+    0 deg elevation).
+  * sigma_URE = 2/3 sigma_URA for GPS (ADD), sigma_URE^S = sigma_URA^S, SOP b_nom = 0, GPS
+    user term: the ADD dual-frequency airborne model, SOP user term 0 (araim.error_models).
+  * Realizations use common random numbers (no axis is a key axis): realization i draws the
+    same GPS epoch in every cell and the same towers in every cell with the same number of
+    SOPs, so neighbouring cells differ by their parameters only, not by sampling noise.
+"""
+
+import functools
+import warnings
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import geometry
+from araim.budget import BUDGET_SEED004_TABLE_I
+from araim.error_models import gnss_variances, sop_variances
+from araim.mhss import _protection_levels, required_order
+from geometry import gpstime
+from geometry.datafiles import data_dir
+from studies.base import Param, count, in_range, non_negative, positive, probability
+
+#: seed 004 section VI, ECEF metres
+ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)
+NAV_FILE = "nav/brdc0010.22n"
+#: the day of the nominal fallback: that of NAV_FILE
+DEFAULT_DAY = (2022, 1, 1)
+#: Table I, GPS
+SIGMA_URA_GPS_M = 1.0
+B_NOM_GPS_M = 0.75
+P_S_GPS = 1e-5
+P_CONST_GPS = 1e-8
+#: Table I, SOP constellation
+P_CONST_SOP = 1e-4
+BUDGET = BUDGET_SEED004_TABLE_I
+#: DESIGN.md: seed 004 Fig. 4 grid
+SIGMA_GRID_M = (0.5, *[float(s) for s in range(1, 26)])
+P_S_GRID = tuple(float(f"{m}e{e}") for e in range(-7, -1) for m in (1, 3)) + (0.1,)
+
+
+def parse_nav(name, v):
+    """'auto' (brdc0010.22n if present, else nominal), 'nominal', or a navigation file."""
+    v = str(v).strip()
+    if v in ("auto", "nominal"):
+        return v
+    p = Path(v).expanduser()
+    if not p.is_file():
+        raise ValueError(f"{name} must be 'auto', 'nominal' or an existing RINEX navigation "
+                         f"file, got {v!r} (not found)")
+    return str(p.resolve())
+
+
+def common_params():
+    """Parameters every seed 004 sweep study exposes (defaults above)."""
+    return {
+        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (brdc0010.22n from OARAIM_DATA, else "
+                     "nominal), 'nominal', or a RINEX navigation file"),
+        "mask_deg": Param(5.0, in_range(0.0, 89.0),
+                          "GPS elevation mask (seed 004 silent; ARAIM practice 5 deg)", "deg"),
+        "sky_step_s": Param(10.0, in_range(1.0, 600.0),
+                            "time grid of the GPS sky table (epochs uniform over a day)", "s"),
+        "d_min_m": Param(5.0, non_negative, "BPP inner radius (seed 004 silent; seed 001)", "m"),
+        "d_max_m": Param(3000.0, positive, "BPP outer radius (seed 004 silent; seed 001)", "m"),
+        "h_min_m": Param(0.0, in_range(-1000.0, 1000.0),
+                         "tower height above the receiver, min (silent)", "m"),
+        "h_max_m": Param(50.0, in_range(-1000.0, 1000.0),
+                         "tower height above the receiver, max (silent)", "m"),
+        "p_const_sop": Param(P_CONST_SOP, probability, "SOP constellation fault (Table I)"),
+        "chunk": Param(5120, count(1024), "realizations per kernel call (memory bound)"),
+    }
+
+
+def check_geometry_params(p):
+    if p["d_min_m"] >= p["d_max_m"]:
+        raise ValueError(f"d_min_m must be < d_max_m, got d_min_m={p['d_min_m']} and "
+                         f"d_max_m={p['d_max_m']}")
+    if p["h_min_m"] > p["h_max_m"]:
+        raise ValueError(f"h_min_m must be <= h_max_m, got h_min_m={p['h_min_m']} and "
+                         f"h_max_m={p['h_max_m']}")
+
+
+def resolve_sky(nav):
+    """(source for geometry.sky, description, is a real file)."""
+    if nav == "nominal":
+        return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008), requested", False
+    if nav == "auto":
+        d = data_dir()
+        p = None if d is None else d / NAV_FILE
+        if p is None or not p.is_file():
+            warnings.warn(f"{NAV_FILE} not found (OARAIM_DATA / ../shared/data); using the "
+                          "built-in nominal GPS 24-slot constellation instead of real "
+                          "ephemerides", stacklevel=2)
+            return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008): real file not found", False
+        nav = str(p)
+    return nav, f"broadcast ephemeris {Path(nav).name}", True
+
+
+def _day_start(source, real):
+    if real:
+        eph = geometry.load_navigation(source, systems=("G",))
+        toe = eph._toe_healthy[np.isfinite(eph._toe_healthy)]
+        days = np.floor(toe / gpstime.SECONDS_PER_DAY).astype(np.int64)
+        vals, counts = np.unique(days, return_counts=True)
+        return float(vals[np.argmax(counts)] * gpstime.SECONDS_PER_DAY)
+    return float(gpstime.gps_seconds(*DEFAULT_DAY))
+
+
+@functools.lru_cache(maxsize=4)
+def gps_sky_table(nav, mask_deg, step_s):
+    """The GPS sky over one day at the receiver: dict of az/el/valid ``(E, S)`` with the
+    visible satellites moved to the front and S the most ever visible, plus a description."""
+    source, desc, real = resolve_sky(nav)
+    t0 = _day_start(source, real)
+    n_t = int(round(86400.0 / step_s))
+    t = t0 + step_s * np.arange(n_t)
+    s = geometry.sky(np.array(ORANGE_COUNTY_ECEF_M), t, source=source, mask_deg=mask_deg,
+                     constellations=("gps",))
+    az, el, valid = (np.asarray(x) for x in (s.az_rad, s.el_rad, s.valid))
+    order = np.argsort(~valid, axis=-1, kind="stable")
+    n_slots = int(valid.sum(-1).max())
+    take = lambda x: np.take_along_axis(x, order, -1)[:, :n_slots]  # noqa: E731
+    az, el, valid = take(az), take(el), take(valid)
+    el = np.where(valid, el, np.pi / 2)  # padding rows: harmless finite values
+    az = np.where(valid, az, 0.0)
+    n_vis = valid.sum(-1)
+    if real:
+        desc = f"broadcast ephemeris {Path(source).name} ({s.sv.size} GPS)"
+    return {"az_rad": az, "el_rad": el, "valid": valid, "t0_gps_s": t0, "step_s": step_s,
+            "description": desc, "real_file": real, "n_visible_min": int(n_vis.min()),
+            "n_visible_max": int(n_vis.max()), "n_visible_mean": float(n_vis.mean())}
+
+
+def draw_gps(key, table_az, table_el, table_valid):
+    """One realization's GPS sky: an epoch uniform over the day's table. Returns the epoch
+    index and (az, el, valid) of shape (S,)."""
+    e = jax.random.randint(jax.random.fold_in(key, 0), (), 0, table_az.shape[0])
+    return e, table_az[e], table_el[e], table_valid[e]
+
+
+def draw_sops(key, n_sops, d_min_m, d_max_m, h_min_m, h_max_m):
+    """One realization's BPP towers (seed 004 section III-D), independent of the GPS draw."""
+    return geometry.bpp_towers(jax.random.fold_in(key, 1), n_sops, d_min_m, d_max_m, h_min_m,
+                               h_max_m)
+
+
+def gps_inputs(el, valid):
+    """Table I GPS inputs of a (..., S) sky: variances (ADD models), b_nom, P_s, labels 0."""
+    vi, va = gnss_variances(el, SIGMA_URA_GPS_M)
+    return dict(var_int=vi, var_acc=va, b_nom=jnp.full(el.shape, B_NOM_GPS_M),
+                p_sat=jnp.full(el.shape, P_S_GPS), constellation=jnp.zeros(el.shape, jnp.int32),
+                valid=valid)
+
+
+def sop_inputs(shape, sigma_ura_sop_m, p_s_sop, label):
+    """SOP inputs of shape (..., N): one constellation ``label``, b_nom 0 (DESIGN.md)."""
+    vi, va = sop_variances(jnp.full(shape, sigma_ura_sop_m))
+    return dict(var_int=vi, var_acc=va, b_nom=jnp.zeros(shape), p_sat=jnp.full(shape, p_s_sop),
+                constellation=jnp.full(shape, label, jnp.int32), valid=jnp.ones(shape, bool))
+
+
+def concat_inputs(a, b):
+    return {k: jnp.concatenate([a[k], b[k]], -1) for k in a}
+
+
+def mhss(g, x, p_const, max_order):
+    """HPL, VPL and status of a batch (B, L) through the private kernel (we are inside jit)."""
+    r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
+                           x["p_sat"], p_const, x["valid"], budget=BUDGET, max_order=max_order)
+    return r.hpl_m, r.vpl_m, r.status, r.order, r.n_modes
+
+
+def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop):
+    """Static max_order for a cell: the order the P_thresh rule needs with every GPS slot in
+    view (the most GPS faults, so the worst case); the kernel still picks each geometry's own
+    order up to it."""
+    L = n_gps_slots + n_sops
+    valid = np.ones((1, L), bool)
+    const = np.array([[0] * n_gps_slots + [1] * n_sops])
+    p_sat = np.array([[P_S_GPS] * n_gps_slots + [p_s_sop] * n_sops])
+    p_const = np.array([[P_CONST_GPS, p_const_sop]])
+    return int(required_order(jnp.asarray(valid), jnp.asarray(const), jnp.asarray(p_sat),
+                              jnp.asarray(p_const), BUDGET.p_thresh, cap=2))

@@ -1,0 +1,300 @@
+"""Seed 004 Fig. 4: mean HPL reduction over sigma_URA^S x P_s^S for 2, 3, 4, 5, 6 and 8 SOPs.
+
+Seed 004 section VI: GPS (Table I) at the Orange County receiver, epochs uniform over a day,
+N SOP towers by BPP in one SOP constellation, Table I budget; "for each combination of P_s^S
+and sigma_URA^S, there are 5000 Monte Carlo realizations ... The HPL reduction is calculated by
+averaging over the 5000 realizations." Grid (DESIGN.md): sigma_URA^S = 0.5, 1, 2, ..., 25 m
+(26) x P_s^S = 1e-7 ... 1e-1 at two points per decade (13), for 2, 3, 4, 5, 6, 8 SOPs.
+
+One realization: a GPS epoch and a BPP draw of the towers; HPL reduction = HPL(GPS only) -
+HPL(GPS + SOPs) (DESIGN.md: positive is better), averaged over the realizations where both are
+finite (the share is stored). Realizations use common random numbers (seed004_common): every
+cell of a panel sees the same geometries, every panel the same GPS epochs.
+
+Both PLs come from ``araim.protection_levels``' kernel: GPS alone (one constellation, order 1)
+and GPS + SOPs (two constellations; the order the P_thresh rule asks for, per geometry, capped
+by the cell's worst case, ``seed004_common.order_for``).
+
+The paper's findings checked in the summary (section VI): (i) >= 2 "regular" SOPs reduce the
+HPL (regular: sigma_URA^S <= 2 m and P_s^S <= 1e-5, our reading of "reasonably small"); (ii)
+the reduction decreases as P_s^S and sigma_URA^S increase; (iii) the sigma_URA^S boundary of
+the positive region moves right with more SOPs; (iv) 2 SOPs at P_s^S = 0.1 always raise the
+HPL; and the closing remark: with enough SOPs, sigma_URA^S = 20 m (20 x GPS) and P_s^S = 1e-3
+(100 x GPS) still reduce it.
+"""
+
+import collections
+import functools
+import hashlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+
+import geometry
+from mc.sweep import Count, Mean
+from studies import seed004_common as c
+from studies.base import Param, StudyResult, SweepStudy, axis, count, positive, probability
+
+#: a reduction is "positive"/"negative" beyond twice the 1e-3 m PL solver tolerance
+TOL_M = 2e-3
+
+
+@functools.partial(jax.jit, static_argnames=("n_sops", "max_order"))
+def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
+               d_min_m, d_max_m, h_min_m, h_max_m, max_order):
+    """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
+    def draw(k):
+        _, az, el, v = c.draw_gps(k, t_az, t_el, t_valid)
+        tw = c.draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m)
+        return az, el, v, tw.az_rad, tw.el_rad
+
+    az, el, v, az_s, el_s = jax.vmap(draw)(keys)
+    x = c.concat_inputs(c.gps_inputs(el, v), c.sop_inputs(az_s.shape, sigma_ura_sop_m, p_s_sop,
+                                                          1))
+    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
+    hpl, vpl, status, order, _ = c.mhss(g, x, jnp.array([c.P_CONST_GPS, p_const_sop]),
+                                        max_order)
+    return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
+
+
+@jax.jit
+def gps_kernel(keys, t_az, t_el, t_valid):
+    """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
+    epoch, az, el, v = jax.vmap(lambda k: c.draw_gps(k, t_az, t_el, t_valid))(keys)
+    hpl, vpl, status, _, _ = c.mhss(geometry.geometry_rows(az, el), c.gps_inputs(el, v),
+                                    jnp.array([c.P_CONST_GPS]), 1)
+    return {"hpl_gps_m": hpl, "vpl_gps_m": vpl, "status_gps": status, "epoch": epoch,
+            "n_gps": jnp.sum(v, -1)}
+
+
+#: GPS-only results by (sky table, keys): common random numbers make them identical in every
+#: cell, so a process computes them once per chunk of keys (a pure function, memoized)
+_GPS_CACHE = collections.OrderedDict()
+_GPS_CACHE_SIZE = 64
+
+
+def gps_only(keys, table, table_id):
+    digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
+                             digest_size=16).hexdigest()
+    k = (table_id, digest)
+    if k not in _GPS_CACHE:
+        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"])
+        _GPS_CACHE[k] = {name: np.asarray(v) for name, v in out.items()}
+        while len(_GPS_CACHE) > _GPS_CACHE_SIZE:
+            _GPS_CACHE.popitem(last=False)
+    else:
+        _GPS_CACHE.move_to_end(k)
+    return _GPS_CACHE[k]
+
+
+def compare(gps, sop):
+    """Per-realization outputs of one cell from the GPS-only and GPS + SOP PLs."""
+    hg, hs = gps["hpl_gps_m"], np.asarray(sop["hpl_sop_m"])
+    vg, vs = gps["vpl_gps_m"], np.asarray(sop["vpl_sop_m"])
+    both = np.isfinite(hg) & np.isfinite(hs)
+    both_v = np.isfinite(vg) & np.isfinite(vs)
+    red = np.where(both, hg - np.where(both, hs, 0.0), 0.0)
+    red_v = np.where(both_v, vg - np.where(both_v, vs, 0.0), 0.0)
+    return {
+        "hpl_reduction_m": red, "vpl_reduction_m": red_v,
+        "hpl_gps_m": np.where(both, hg, 0.0), "hpl_sop_m": np.where(both, hs, 0.0),
+        "both_finite": both, "vpl_both_finite": both_v,
+        "hpl_reduced": both & (red > 0.0),
+        "hpl_increase_m": -red, "vpl_increase_m": -red_v,
+        "hpl_raised": both & (red <= TOL_M), "vpl_raised": both_v & (red_v <= TOL_M),
+        "order_2": np.asarray(sop["order_sop"]) >= 2,
+        "n_gps": gps["n_gps"].astype(np.float64),
+    }
+
+
+class Fig4Cell:
+    """The kernel of one cell: keys (chunk,) -> per-realization outputs (NumPy). ``coords``
+    gives n_sops, sigma_ura_sop_m and p_s_sop (axes, or fixed parameters)."""
+
+    def __init__(self, params, coords):
+        self.table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
+        self.table_id = (params["nav"], params["mask_deg"], params["sky_step_s"])
+        self.jtable = {k: jnp.asarray(self.table[k]) for k in ("az_rad", "el_rad", "valid")}
+        n_slots = self.table["az_rad"].shape[1]
+        self.n_sops = int(coords["n_sops"])
+        self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
+                     params["p_const_sop"], params["d_min_m"], params["d_max_m"],
+                     params["h_min_m"], params["h_max_m"])
+        self.max_order = c.order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
+                                     params["p_const_sop"])
+
+    def __call__(self, keys):
+        gps = gps_only(keys, self.jtable, self.table_id)
+        sop = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
+                         self.jtable["valid"], self.n_sops, *self.args, self.max_order)
+        return compare(gps, sop)
+
+
+def largest_reducing_sigma(red_m, sigmas):
+    """Per row (e.g. a P_s value) the largest sigma whose mean reduction is > TOL_M (NaN if
+    none)."""
+    out = np.full(red_m.shape[0], np.nan)
+    for i, row in enumerate(red_m):
+        pos = np.flatnonzero(row > TOL_M)
+        if pos.size:
+            out[i] = sigmas[pos.max()]
+    return out
+
+
+def monotone_share(red_m):
+    """Share of adjacent cell pairs (along sigma for each P_s, along P_s for each sigma) where the
+    reduction does not increase by more than TOL_M when the parameter grows: finding (ii)."""
+    d_sigma = np.diff(red_m, axis=-1)  # (..., P, S-1)
+    d_p = np.diff(red_m, axis=-2)
+    ok = np.concatenate([(d_sigma <= TOL_M).ravel(), (d_p <= TOL_M).ravel()])
+    return float(np.mean(ok)) if ok.size else float("nan")
+
+
+class Fig4HplMaps(SweepStudy):
+    name = "seed004-fig4-hpl-maps"
+    title = "Seed 004 Fig. 4: mean HPL reduction over sigma_URA^S x P_s^S, 2-8 SOPs"
+    seed_file = "004_55e51818ceb3e5a9.txt"
+    realization = ("one GPS epoch (uniform over the day) and one BPP draw of the SOPs; the "
+                   "cell's result is the mean over its realizations")
+    default_realizations = 5000
+    quick_realizations = 1024
+    axis_names = ("n_sops", "p_s_sop", "sigma_ura_sop_m")
+    key_axes = ()  # common random numbers across every cell (seed004_common)
+    params = {
+        "n_sops": Param((2, 3, 4, 5, 6, 8), axis(count(1, 16)),
+                          "SOPs in one SOP constellation, a panel each (seed 004 Fig. 4)"),
+        "sigma_ura_sop_m": Param(c.SIGMA_GRID_M, axis(positive),
+                                   "sigma_URA^S grid (seed 004: 0.5-25 m)", "m"),
+        "p_s_sop": Param(c.P_S_GRID, axis(probability),
+                           "P_s^S grid (seed 004: 1e-7-1e-1)"),
+        **c.common_params(),
+    }
+
+    def check(self, p):
+        c.check_geometry_params(p)
+
+    def kernel(self, params, coords):
+        return Fig4Cell(params, coords)
+
+    def reducers(self, params):
+        return (Mean("hpl_reduction_m", where="both_finite"),
+                Mean("vpl_reduction_m", where="vpl_both_finite"),
+                Mean("hpl_gps_m", where="both_finite"), Mean("hpl_sop_m", where="both_finite"),
+                Mean("n_gps"), Count("both_finite"), Count("hpl_reduced"), Count("order_2"))
+
+    def finish(self, params, ds, realizations, seed):
+        table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
+        red = ds["hpl_reduction_m_mean"]  # (n_sops, p_s, sigma)
+        sig = ds["sigma_ura_sop_m"].values
+        p_s = ds["p_s_sop"].values
+        n_sops = ds["n_sops"].values
+        rows, metrics = [], {}
+        share_finite = float(ds["both_finite_count"].sum() / (realizations * red.size))
+        # (i) regular SOPs
+        reg = red.where((red["sigma_ura_sop_m"] <= 2.0) & (red["p_s_sop"] <= 1e-5), drop=True)
+        reg = reg.sel(n_sops=[n for n in n_sops if n >= 2])
+        if reg.size:
+            rows.append({"quantity": "finding (i): cells with >= 2 regular SOPs (sigma_URA^S <= "
+                         "2 m, P_s^S <= 1e-5) that reduce the HPL", "unit": "%",
+                         "published": 100.0, "reproduced": 100.0 * float((reg > TOL_M).mean()),
+                         "note": f"smallest mean reduction {float(reg.min()):.3f} m"})
+        # (ii) monotone decrease
+        multi = red.sel(n_sops=[n for n in n_sops if n >= 2]).values
+        if multi.size and (len(sig) > 1 or len(p_s) > 1):
+            rows.append({"quantity": "finding (ii): adjacent cells where the reduction does not "
+                         "grow with sigma_URA^S or P_s^S (>= 2 SOPs)", "unit": "%",
+                         "published": 100.0, "reproduced": 100.0 * monotone_share(multi),
+                         "note": f"tolerance {TOL_M * 1e3:g} mm (2 x PL solver tolerance)"})
+        # (iii) boundary at P_s = 1e-4 moves right
+        at = np.flatnonzero(np.isclose(p_s, 1e-4))
+        if at.size:
+            bound = {int(n): float(largest_reducing_sigma(
+                red.sel(n_sops=n).values[at[:1]], sig)[0]) for n in n_sops}
+            metrics["largest_reducing_sigma_ura_sop_m_at_p_s_1e-4"] = bound
+            for n, b in bound.items():
+                rows.append({"quantity": f"largest sigma_URA^S still reducing HPL at P_s^S = "
+                             f"1e-4, {n} SOPs", "unit": "m", "published": None,
+                             "reproduced": b, "note": "Fig. 4 gives no number; NaN: none"})
+            vals = [bound[int(n)] for n in sorted(n_sops) if n >= 2]
+            vals = [-np.inf if np.isnan(v) else v for v in vals]
+            if len(vals) > 1:
+                rows.append({"quantity": "finding (iii): that boundary never moves left as the "
+                             "number of SOPs grows", "unit": "1 = yes", "published": 1.0,
+                             "reproduced": float(all(np.diff(vals) >= 0)), "note": ""})
+        # (iv) 2 SOPs at P_s = 0.1
+        if 2 in n_sops and np.any(np.isclose(p_s, 0.1)):
+            r = red.sel(n_sops=2).values[np.flatnonzero(np.isclose(p_s, 0.1))[0]]
+            rows.append({"quantity": "finding (iv): sigma_URA^S cells where 2 SOPs with P_s^S = "
+                         "0.1 raise the HPL", "unit": "%", "published": 100.0,
+                         "reproduced": 100.0 * float(np.mean(r < -TOL_M)),
+                         "note": f"largest mean reduction {float(r.max()):.3f} m"})
+        # closing remark: sigma 20 m, P_s 1e-3, enough SOPs
+        if 8 in n_sops and np.any(np.isclose(sig, 20.0)) and np.any(np.isclose(p_s, 1e-3)):
+            v = float(red.sel(n_sops=8).values[np.flatnonzero(np.isclose(p_s, 1e-3))[0],
+                                                np.flatnonzero(np.isclose(sig, 20.0))[0]])
+            rows.append({"quantity": "mean HPL reduction, 8 SOPs, sigma_URA^S = 20 m, P_s^S = "
+                         "1e-3 (text: still reduces)", "unit": "m", "published": None,
+                         "reproduced": v, "note": "> 0 means the remark holds"})
+        metrics.update({
+            "share_both_finite": share_finite,
+            "mean_hpl_gps_m": float(ds["hpl_gps_m_mean"].mean()),
+            "max_mean_hpl_reduction_m": float(red.max()),
+            "min_mean_hpl_reduction_m": float(red.min()),
+            "share_cells_reducing": float((red > TOL_M).mean()),
+            "share_realizations_order_2": float(ds["order_2_count"].sum()
+                                                / (realizations * red.size)),
+            "gps_visible_min_max_mean": [table["n_visible_min"], table["n_visible_max"],
+                                         round(table["n_visible_mean"], 3)],
+            "sky_source": table["description"],
+        })
+        ds = ds.assign_attrs(sky_source=table["description"], realizations=int(realizations),
+                             tol_m=TOL_M, mask_deg=params["mask_deg"])
+        return StudyResult(ds, rows, metrics, {"sky_source": table["description"]})
+
+    def plot(self, out_dir):
+        import matplotlib.pyplot as plt
+        from matplotlib.colors import ListedColormap
+
+        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
+        red = ds["hpl_reduction_m_mean"]
+        sig = ds["sigma_ura_sop_m"].values
+        p_s = ds["p_s_sop"].values
+        n_sops = ds["n_sops"].values
+        ncol = min(3, len(n_sops))
+        nrow = -(-len(n_sops) // ncol)
+        fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.4 * nrow), squeeze=False)
+        vmax = max(float(red.where(red > 0).max().fillna(1.0)), 1e-3)
+        red_cmap = ListedColormap(["tab:red"])
+        for ax, n in zip(axes.ravel(), n_sops, strict=False):
+            v = red.sel(n_sops=n).values  # (p_s, sigma)
+            xs, ys = _edges(sig, log=False), _edges(p_s, log=True)
+            im = ax.pcolormesh(xs, ys, np.where(v > 0, v, np.nan), cmap="viridis", vmin=0,
+                               vmax=vmax, shading="flat")
+            ax.pcolormesh(xs, ys, np.where(v <= 0, 1.0, np.nan), cmap=red_cmap, shading="flat")
+            ax.set_yscale("log")
+            ax.set_title(f"{n} SOPs (red: HPL increases)", fontsize=9)
+            ax.set_xlabel("sigma_URA^S (m)")
+            ax.set_ylabel("P_s^S")
+        for ax in axes.ravel()[len(n_sops):]:
+            ax.axis("off")
+        fig.colorbar(im, ax=axes.ravel().tolist(), label="mean HPL reduction (m)", shrink=0.8)
+        fig.suptitle(f"Seed 004 Fig. 4: HPL(GPS) - HPL(GPS + SOPs), "
+                     f"{ds.attrs.get('realizations', '?')} realizations per cell; "
+                     f"{ds.attrs.get('sky_source', '')}", fontsize=9)
+        path = f"{out_dir}/fig4_hpl_reduction_maps.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return [path]
+
+
+def _edges(x, log):
+    """Cell edges for pcolormesh around centres x (geometric means on a log axis)."""
+    x = np.asarray(x, float)
+    if x.size == 1:
+        return np.array([x[0] / 2, x[0] * 2]) if log else np.array([x[0] - 0.5, x[0] + 0.5])
+    t = np.log10(x) if log else x
+    mid = (t[1:] + t[:-1]) / 2
+    e = np.concatenate([[t[0] - (mid[0] - t[0])], mid, [t[-1] + (t[-1] - mid[-1])]])
+    return 10.0**e if log else e
