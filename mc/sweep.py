@@ -561,15 +561,22 @@ def _cells(axes, key_axes):
 
 
 def _factory_id(kernel_factory, distributed: bool):
+    """A digest naming the kernel factory in the workers' kernel caches (None in-process, where
+    the factory need not be picklable)."""
     try:
         return hashlib.sha1(pickle.dumps(kernel_factory)).hexdigest()
     except Exception as e:  # noqa: BLE001
-        if distributed:
+        if not distributed:
+            return None
+        try:  # Dask ships functions with cloudpickle, which also takes closures
+            import cloudpickle
+
+            return hashlib.sha1(cloudpickle.dumps(kernel_factory)).hexdigest()
+        except Exception:  # noqa: BLE001
             raise TypeError(
-                f"kernel_factory {kernel_factory!r} cannot be pickled ({e}); Dask workers need a "
-                "module-level function or a functools.partial of one with plain-data arguments"
-            ) from None
-        return None
+                f"kernel_factory {kernel_factory!r} cannot be pickled ({e}); Dask workers need "
+                "a module-level function or a functools.partial of one with plain-data "
+                "arguments") from None
 
 
 def _missing_runs(covered: np.ndarray):
