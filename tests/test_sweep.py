@@ -4,7 +4,6 @@ resume; reducers against plain NumPy on the raw per-realization outputs."""
 import functools
 import json
 import math
-import sys
 import warnings
 import zlib
 
