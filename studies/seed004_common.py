@@ -89,7 +89,7 @@ def common_params():
         "h_max_m": Param(50.0, in_range(-1000.0, 1000.0),
                          "tower height above the receiver, max (silent)", "m"),
         "p_const_sop": Param(P_CONST_SOP, probability, "SOP constellation fault (Table I)"),
-        "chunk": Param(5120, count(1024), "realizations per kernel call (memory bound)"),
+        "chunk": Param(5120, count(1024), "realizations per task and chunk file (not a result)"),
     }
 
 

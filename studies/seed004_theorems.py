@@ -153,7 +153,7 @@ class Theorems(SweepStudy):
     params = {
         "n_gps": Param(tuple(range(5, 13)), axis(count(5, GPS_SLOTS)),
                        "GPS satellites of the old system (M_s >= 3 + M_const = 4)"),
-        "chunk": Param(4096, count(1024), "realizations per kernel call (memory bound)"),
+        "chunk": Param(4096, count(1024), "realizations per task and chunk file (not a result)"),
     }
 
     def kernel(self, params, coords):
