@@ -39,3 +39,20 @@ __all__ = [
     "slopes",
     "wnls",
 ]
+
+from araim import ekf, ekf_raim  # noqa: E402
+from araim.ekf import EkfParams, EkfState, ekf_init, ekf_predict, ekf_step, ekf_update, run_ekf  # noqa: E402,E501
+from araim.ekf_raim import (  # noqa: E402
+    DriveSummary,
+    RaimConfig,
+    drive_setup,
+    monte_carlo_drive,
+    run_ekf_raim,
+    simulate_drive,
+)
+
+__all__ += [
+    "DriveSummary", "EkfParams", "EkfState", "RaimConfig", "drive_setup", "ekf", "ekf_init",
+    "ekf_predict", "ekf_raim", "ekf_step", "ekf_update", "monte_carlo_drive", "run_ekf",
+    "run_ekf_raim", "simulate_drive",
+]

@@ -57,3 +57,20 @@ __all__ += [
     "Recording", "RecordingError", "example_recording", "gnss_matrix", "load_recording",
     "pseudorange_matrix", "recording", "tower_clock_m", "write_recording",
 ]
+
+from geometry import clocks, imu, trajectory  # noqa: E402
+from geometry.imu import ImuSpec, vn100  # noqa: E402
+from geometry.trajectory import (  # noqa: E402
+    SCENARIOS,
+    Scenario,
+    Segment,
+    Trajectory,
+    drive_seed000,
+    drive_seed002,
+    uav_seed004,
+)
+
+__all__ += [
+    "ImuSpec", "SCENARIOS", "Scenario", "Segment", "Trajectory", "clocks", "drive_seed000",
+    "drive_seed002", "imu", "trajectory", "uav_seed004", "vn100",
+]
