@@ -264,7 +264,8 @@ class Fig4HplMaps(SweepStudy):
         n_sops = ds["n_sops"].values
         ncol = min(3, len(n_sops))
         nrow = -(-len(n_sops) // ncol)
-        fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.4 * nrow), squeeze=False)
+        fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.6 * nrow), squeeze=False,
+                                 layout="constrained")
         vmax = max(float(red.where(red > 0).max().fillna(1.0)), 1e-3)
         red_cmap = ListedColormap(["tab:red"])
         for ax, n in zip(axes.ravel(), n_sops, strict=False):
@@ -279,7 +280,7 @@ class Fig4HplMaps(SweepStudy):
             ax.set_ylabel("P_s^S")
         for ax in axes.ravel()[len(n_sops):]:
             ax.axis("off")
-        fig.colorbar(im, ax=axes.ravel().tolist(), label="mean HPL reduction (m)", shrink=0.8)
+        fig.colorbar(im, ax=axes.ravel().tolist(), label="mean HPL reduction (m)", shrink=0.6)
         fig.suptitle(f"Seed 004 Fig. 4: HPL(GPS) - HPL(GPS + SOPs), "
                      f"{ds.attrs.get('realizations', '?')} realizations per cell; "
                      f"{ds.attrs.get('sky_source', '')}", fontsize=9)
