@@ -74,3 +74,9 @@ __all__ += [
     "ImuSpec", "SCENARIOS", "Scenario", "Segment", "Trajectory", "clocks", "drive_seed000",
     "drive_seed002", "imu", "trajectory", "uav_seed004", "vn100",
 ]
+
+from geometry import atmosphere, rinex_obs  # noqa: E402
+from geometry.rinex_obs import ObservationFileError, Observations, read_observations  # noqa: E402
+
+__all__ += ["ObservationFileError", "Observations", "atmosphere", "read_observations",
+            "rinex_obs"]
