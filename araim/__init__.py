@@ -56,3 +56,8 @@ __all__ += [
     "ekf_predict", "ekf_raim", "ekf_step", "ekf_update", "monte_carlo_drive", "run_ekf",
     "run_ekf_raim", "simulate_drive",
 ]
+
+from araim import snapshot  # noqa: E402
+from araim.snapshot import MonitorReplay, ReplayResult, replay, replay_metrics  # noqa: E402
+
+__all__ += ["MonitorReplay", "ReplayResult", "replay", "replay_metrics", "snapshot"]
