@@ -1,5 +1,6 @@
 """All studies by name."""
 
+from studies.rinex_replay import RinexReplay
 from studies.seed001_fig3 import Fig3Elevation
 from studies.seed001_fig4 import Fig4HplCdf
 from studies.seed001_fig5 import Fig5Madrid24h
@@ -8,7 +9,7 @@ from studies.seed004_fig4 import Fig4HplMaps
 from studies.seed004_theorems import Theorems
 
 STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
-                                Fig4HplMaps(), Theorems())}
+                                Fig4HplMaps(), Theorems(), RinexReplay())}
 
 
 def get_study(name):
