@@ -125,6 +125,7 @@ def resolve_files(obs, nav):
         obs = str(p)
         if nav == "auto":
             nav = str(d / DEFAULT_NAV)
+    rinex_obs.check_observation_file(obs)  # an obs/nav mix-up is named before nav lookup
     if nav == "auto":
         p = Path(obs)
         cand = p.with_name(p.name[:-1] + "n") if p.name[-1:] in "oO" else None

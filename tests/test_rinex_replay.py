@@ -55,6 +55,30 @@ def test_obs_file_errors_name_what_is_missing(tmp_path):
         rinex_obs.read_observations(garbage)
 
 
+def test_rinex3_observation_file(tmp_path):
+    """RINEX 3 (mixed header, 'SYS / # / OBS TYPES'): C1C is read; epochs in GPS time."""
+    lines = [
+        "     3.03           OBSERVATION DATA    M                   RINEX VERSION / TYPE",
+        " -3976219.5082  3382372.5671  3652512.9849                  APPROX POSITION XYZ",
+        "G    3 C1C L1C C2W                                          SYS / # / OBS TYPES",
+        "  2005     4     2     0     0    0.0000000     GPS         TIME OF FIRST OBS",
+        "                                                            END OF HEADER",
+        "> 2005 04 02 00 00  0.0000000  0  2",
+        "G03  24767686.375 8  43647388.242 8  24767684.822 8",
+        "G07  24361933.475 8   -537007.140 8  24361930.599 8",
+        "> 2005 04 02 00 00 30.0000000  0  2",
+        "G03  24795930.671 8  43763044.969 8  24795930.134 8",
+        "G07  24359892.126 8   -545368.597 8  24359888.431 8"]
+    path = tmp_path / "r3.05o"
+    path.write_text("\n".join(lines) + "\n")
+    obs = rinex_obs.read_observations(path)
+    assert obs.code == "C1C" and obs.version == 3.03 and list(obs.sv) == ["G03", "G07"]
+    np.testing.assert_array_equal(obs.pseudorange_m, [[24767686.375, 24361933.475],
+                                                      [24795930.671, 24359892.126]])
+    assert obs.t_gps_s[0] == geometry.gpstime.gps_seconds(2005, 4, 2)
+    assert obs.t_gps_s[1] - obs.t_gps_s[0] == 30.0
+
+
 def test_study_without_data_says_how_to_give_files(tmp_path, monkeypatch):
     monkeypatch.setenv("OARAIM_DATA", str(tmp_path))  # an existing folder without the files
     study = STUDIES["rinex-replay"]
@@ -157,7 +181,7 @@ def test_measurement_model_recovers_position_to_a_millimetre(station):
 def test_real_station_solves_near_surveyed_position(shared_data, stem):
     """GSI stations 0759 and 3040, 2005-04-02 00:00-01:00, C1 code, broadcast orbits and clocks,
     Klobuchar + MOPS, 5 deg mask: measured median HPE 0.36 m / max 0.93 m (0759) and
-    0.49 m / 1.7 m (3040) against the header's surveyed APPROX POSITION; the bounds leave room
+    0.45 m / 1.46 m (3040); median VPE 1.8 m and 2.2 m against the header's surveyed APPROX POSITION; the bounds leave room
     for nothing but noise (a missing T_GD, Sagnac or clock term gives metres to tens of m)."""
     study = STUDIES["rinex-replay"]
     obs = shared_data / "obs" / f"{stem}.05o"
@@ -182,3 +206,22 @@ def test_real_station_solves_near_surveyed_position(shared_data, stem):
     used = ds["used"].values
     assert 1.0 < np.median(ds["iono_m"].values[used]) < 20.0
     assert 2.3 < np.min(ds["tropo_m"].values[used]) < 2.6 * 10.3
+
+
+def test_nav_header_without_klobuchar_coefficients(shared_data, tmp_path):
+    """Without ION ALPHA / ION BETA the replay applies no ionospheric correction, warns, says so
+    in the summary, and bounds the whole delay with sigma_iono (the HPLs do not shrink)."""
+    src = shared_data / "obs" / "07590920.05n"
+    text = [ln for ln in src.read_text().splitlines() if "ION ALPHA" not in ln[60:]
+            and "ION BETA" not in ln[60:]]
+    nav = tmp_path / "07590920.05n"
+    nav.write_text("\n".join(text) + "\n")
+    assert rinex_obs.navigation_extras(nav).alpha is None
+    study = STUDIES["rinex-replay"]
+    params = study.validate({"obs": str(shared_data / "obs" / "07590920.05o"), "nav": str(nav)})
+    with pytest.warns(UserWarning, match="no Klobuchar coefficients"):
+        res = study.run(params, 2880, 0, None)
+    m = res.metrics
+    assert m["iono_model"].startswith("none (header lacks")
+    assert np.all(res.dataset["iono_m"].values == 0.0)
+    assert m["misleading_information_epochs"] == 0 and m["hpl_mhss_median_m"] > 50.0
