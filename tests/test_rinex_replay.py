@@ -181,8 +181,9 @@ def test_measurement_model_recovers_position_to_a_millimetre(station):
 def test_real_station_solves_near_surveyed_position(shared_data, stem):
     """GSI stations 0759 and 3040, 2005-04-02 00:00-01:00, C1 code, broadcast orbits and clocks,
     Klobuchar + MOPS, 5 deg mask: measured median HPE 0.36 m / max 0.93 m (0759) and
-    0.45 m / 1.46 m (3040); median VPE 1.8 m and 2.2 m against the header's surveyed APPROX POSITION; the bounds leave room
-    for nothing but noise (a missing T_GD, Sagnac or clock term gives metres to tens of m)."""
+    0.45 m / 1.46 m (3040), median VPE 1.8 m and 2.2 m, against the header's surveyed APPROX
+    POSITION; the bounds leave room for noise only (a missing T_GD, Sagnac or clock term
+    gives metres to tens of metres)."""
     study = STUDIES["rinex-replay"]
     obs = shared_data / "obs" / f"{stem}.05o"
     sets = {"obs": str(obs), "nav": str(obs.with_suffix(".05n"))}
