@@ -329,8 +329,9 @@ class RinexReplay(Study):
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagram "
                        "(LPV-200)", "m"),
         "val_m": Param(35.0, positive, "vertical alert limit (LPV-200)", "m"),
-        "chunk": Param(BLOCK_EPOCHS, count(1), "epochs per progress step (kernels always "
-                       f"work on blocks of {BLOCK_EPOCHS} epochs; results never depend on it)"),
+        "chunk": Param(BLOCK_EPOCHS, count(1), "accepted for the common study interface and "
+                       f"ignored: the replay always runs in blocks of {BLOCK_EPOCHS} epochs "
+                       "(one compilation, results independent of any chunking)"),
     }
 
     def run(self, params, realizations, seed, progress):
