@@ -302,6 +302,7 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
 
 class RinexReplay(Study):
     name = "rinex-replay"
+    requires_data = True  # real observation files only (generic tests skip without them)
     title = "Real GNSS data: snapshot slope RAIM and ARAIM (MHSS), HPE vs HPL, Stanford diagram"
     seed_file = "004_55e51818ceb3e5a9.txt"
     realization = "one epoch of the observation file (--realizations N: the first N epochs)"

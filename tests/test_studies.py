@@ -110,8 +110,10 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
 
 
 @pytest.mark.parametrize("name", list(STUDIES))
-def test_study_results_bit_identical_for_any_chunk_size(name):
+def test_study_results_bit_identical_for_any_chunk_size(name, request):
     study = STUDIES[name]
+    if getattr(study, "requires_data", False):
+        request.getfixturevalue("shared_data")  # skips (or fails under OARAIM_REQUIRE_DATA)
     small = SMALL.get(name, {})
     a = study.run(study.validate({"chunk": 1024, **small}), 3000, 4, None)
     b = study.run(study.validate({"chunk": 4096, **small}), 3000, 4, None)
@@ -120,7 +122,9 @@ def test_study_results_bit_identical_for_any_chunk_size(name):
 
 
 @pytest.mark.parametrize("name", list(STUDIES))
-def test_run_writes_data_summary_provenance_and_figures(tmp_path, name):
+def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request):
+    if getattr(STUDIES[name], "requires_data", False):
+        request.getfixturevalue("shared_data")
     sets = [f"{k}={v}" for k, v in SMALL.get(name, {}).items()]
     summary, sdir, figures, _ = run_study(name, realizations=2048, out=tmp_path, sets=sets,
                                           show_progress=False)
