@@ -1,15 +1,18 @@
 """All studies by name."""
 
 from studies.rinex_replay import RinexReplay
+from studies.seed000_ekf_raim import Seed000EkfRaim
 from studies.seed001_fig3 import Fig3Elevation
 from studies.seed001_fig4 import Fig4HplCdf
 from studies.seed001_fig5 import Fig5Madrid24h
+from studies.seed002_outlier import Seed002Outlier
 from studies.seed004_fig3 import Fig3OneSop
 from studies.seed004_fig4 import Fig4HplMaps
 from studies.seed004_theorems import Theorems
 
 STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
-                                Fig4HplMaps(), Theorems(), RinexReplay())}
+                                Fig4HplMaps(), Theorems(), RinexReplay(), Seed000EkfRaim(),
+                                Seed002Outlier())}
 
 
 def get_study(name):

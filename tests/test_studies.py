@@ -106,7 +106,16 @@ def test_fig4_sop_curve_dominates(fig4_50k):
 SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          "seed004-fig3-one-sop": {"p_s_sop": "1e-5,1e-1"},
          "seed004-fig4-hpl-maps": {"n_sops": "2,8", "p_s_sop": "1e-4", "sigma_ura_sop_m": "1,20"},
-         "seed004-theorems": {"n_gps": "5,9"}}
+         "seed004-theorems": {"n_gps": "5,9"},
+         # a realization is a whole drive (~0.1 s): 100 s of each drive (fault onsets 25 / 95 s)
+         "seed000-ekf-raim": {"duration_s": "100"},
+         "seed002-outlier": {"duration_s": "100"}}
+
+
+def _n(study, n):
+    """Realizations for the generic tests: ``study.test_realizations`` caps them where one
+    realization is expensive (a whole EKF drive run)."""
+    return min(n, getattr(study, "test_realizations", n))
 
 
 @pytest.mark.parametrize("name", list(STUDIES))
@@ -115,8 +124,8 @@ def test_study_results_bit_identical_for_any_chunk_size(name, request):
     if getattr(study, "requires_data", False):
         request.getfixturevalue("shared_data")  # skips (or fails under OARAIM_REQUIRE_DATA)
     small = SMALL.get(name, {})
-    a = study.run(study.validate({"chunk": 1024, **small}), 3000, 4, None)
-    b = study.run(study.validate({"chunk": 4096, **small}), 3000, 4, None)
+    a = study.run(study.validate({"chunk": 1024, **small}), _n(study, 3000), 4, None)
+    b = study.run(study.validate({"chunk": 4096, **small}), _n(study, 3000), 4, None)
     xr.testing.assert_identical(a.dataset, b.dataset)
     assert json.dumps(a.metrics, default=str) == json.dumps(b.metrics, default=str)
 
@@ -126,7 +135,8 @@ def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request)
     if getattr(STUDIES[name], "requires_data", False):
         request.getfixturevalue("shared_data")
     sets = [f"{k}={v}" for k, v in SMALL.get(name, {}).items()]
-    summary, sdir, figures, _ = run_study(name, realizations=2048, out=tmp_path, sets=sets,
+    n = _n(STUDIES[name], 2048)
+    summary, sdir, figures, _ = run_study(name, realizations=n, out=tmp_path, sets=sets,
                                           show_progress=False)
     assert (sdir / "data.zarr").is_dir()
     s = json.loads((sdir / "summary.json").read_text())
@@ -134,7 +144,7 @@ def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request)
     for row in s["rows"]:
         assert set(row) >= {"quantity", "unit", "published", "reproduced", "note"}
     p = json.loads((sdir / "provenance.json").read_text())
-    assert p["realizations"] == 2048 and p["seed"] == 0 and p["parameters"]
+    assert p["realizations"] == n and p["seed"] == 0 and p["parameters"]
     assert figures and all((sdir / f.split("/")[-1]).is_file() for f in figures)
     text = build_report(tmp_path)
     assert name in text and "| quantity | unit | published | reproduced | note |" in text
