@@ -5,14 +5,16 @@ from studies.seed000_ekf_raim import Seed000EkfRaim
 from studies.seed001_fig3 import Fig3Elevation
 from studies.seed001_fig4 import Fig4HplCdf
 from studies.seed001_fig5 import Fig5Madrid24h
+from studies.seed001_vehicle import Seed001Vehicle
 from studies.seed002_outlier import Seed002Outlier
 from studies.seed004_fig3 import Fig3OneSop
 from studies.seed004_fig4 import Fig4HplMaps
 from studies.seed004_theorems import Theorems
+from studies.seed004_uav import Seed004Uav
 
 STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
                                 Fig4HplMaps(), Theorems(), RinexReplay(), Seed000EkfRaim(),
-                                Seed002Outlier())}
+                                Seed002Outlier(), Seed001Vehicle(), Seed004Uav())}
 
 
 def get_study(name):

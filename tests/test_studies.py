@@ -109,7 +109,11 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          "seed004-theorems": {"n_gps": "5,9"},
          # a realization is a whole drive (~0.1 s): 100 s of each drive (fault onsets 25 / 95 s)
          "seed000-ekf-raim": {"duration_s": "100"},
-         "seed002-outlier": {"duration_s": "100"}}
+         "seed002-outlier": {"duration_s": "100"},
+         # a realization is a noise draw of the drive: 5 s of it; the UAV: 300 epochs, no
+         # exclusion replay (detect_and_exclude costs ~50 ms per epoch on 2 cores)
+         "seed001-vehicle": {"duration_s": "5"},
+         "seed004-uav": {"n_epochs": "300", "exclusion": "false"}}
 
 
 def _n(study, n):

@@ -1,0 +1,597 @@
+"""Seed 004 section VII: the UAV flight with GPS + up to 11 LTE towers, snapshot OARAIM per
+epoch (Figs. 6-9).
+
+Setup:
+  * Flight: ``geometry.uav_seed004()`` (815 m in 220 s, 11 towers, origin downtown Riverside,
+    CA); the seed gives 2880 epochs and 220 s but no rate: we take 2880 epochs spread uniformly
+    over the flight (t_k = k 220 / 2880 s, 13.09 Hz). One realization = one epoch;
+    ``--realizations N`` replays the first N of the ``n_epochs`` epochs.
+  * GPS sky: broadcast ephemeris ``nav/brdc0010.22n`` (2022-01-01; the seed does not date the
+    flight) from OARAIM_DATA at ``start_h`` = 18.0 h GPS time (10:00 local, a daylight flight;
+    chosen before any result), else the nominal 24-slot constellation with a warning
+    (provenance says which). Mask 15 deg (seed 004 VII-B).
+  * Towers in three SOP constellations (DESIGN.md: three carriers): azimuth-sorted tower j
+    belongs to carrier j mod 3 (A: 4 towers, B: 4, C: 3, interleaved in azimuth). SOPs are
+    numbered carrier A first, then B, then C, and are added in that order (seed 004 VII-D:
+    "the order of adding SOPs followed the numbering"): +1 = one SOP of carrier A (a new
+    constellation with one SOP: Theorem 2), +2 and +4 = carrier A, +8 = A and B, +11 = all.
+  * Measurements: ``geometry.gnss_scenario`` (module docstring); noise GPS N(0, C_acc) (ADD
+    accuracy model, sigma_URE = 2/3 sigma_URA), LTE N(0, ``sigma_lte_noise_m``^2) with 2 m
+    (the scenario's "meter-level" LTE ranging); the noise of epoch k is drawn from
+    fold_in(key(seed), k), so an epoch's result does not depend on N. ``--set recording=PATH``
+    replays a recorded flight (``geometry.recording`` format with gnss, pseudoranges, truth)
+    through the same path instead.
+  * Integrity: Table I (``araim.BUDGET_SEED004_TABLE_I`` by its symbols), P_s^S = 1e-4 and
+    sigma_URA^S = 3 m (seed 004 VII-A and VII-D), P_const^S = 1e-4, SOP b_nom = 0, SOP user
+    term 0, GPS user term the ADD dual-frequency airborne model (DESIGN.md "silent").
+  * Per configuration (GPS + first n SOPs, n = 0..11): WNLS (C_int weights, one clock per
+    group) and MHSS all-in-view HPL (``araim.protection_levels``; each configuration's fault-
+    mode order is the smallest meeting P_thresh over its epochs). GPS + all SOPs also through
+    ``araim.snapshot.replay`` with ``detect_and_exclude`` (Fig. 6: HPE and HPL of the solution
+    kept).
+  * Fig. 7 (Theorem 1): a bias ramp ``fault_ramp_mps`` from ``fault_onset_s`` on one GPS
+    satellite (PRN 8 as in the seed if it is in view the whole flight, else the lowest PRN that
+    is); the solution-separation statistic |dx_q| and threshold T_q of that satellite's fault
+    mode, GPS only vs GPS + SOP 1, and the detection times (first epoch after the onset with a
+    test coefficient tau > 1, any mode).
+"""
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+
+import araim
+import geometry
+from araim import snapshot
+from araim.budget import BUDGET_SEED004_TABLE_I
+from araim.error_models import gnss_variances, sop_variances
+from araim.fde import solution_separation
+from araim.mhss import required_order
+from geometry import gnss_scenario, gpstime
+from geometry.recording import load_recording
+from studies.base import (
+    Param,
+    Study,
+    StudyResult,
+    count,
+    in_range,
+    non_negative,
+    positive,
+    probability,
+)
+from studies.seed004_common import parse_nav, resolve_sky
+
+PUBLISHED_EPOCHS = 2880
+FLIGHT_S = 220.0
+#: seed 004 VII: carriers of the 11 towers (names only: which tower is whose is not published)
+CARRIERS = ("A", "B", "C")
+#: Stanford-diagram configurations of Fig. 9
+STANFORD_SOPS = (0, 1, 2, 4, 8)
+#: epochs per MHSS kernel call (fixed: results do not depend on N or the chunk)
+BLOCK = 480
+BLOCK_FDE = 96
+
+
+def parse_recording(name, v):
+    v = str(v).strip()
+    if v == "none":
+        return v
+    p = Path(v).expanduser()
+    if not p.exists():
+        raise ValueError(f"{name} must be 'none' or a recording folder, got {v!r} (not found)")
+    return str(p.resolve())
+
+
+def parse_prn(name, v):
+    v = str(v).strip()
+    if v == "auto":
+        return v
+    try:
+        n = int(v)
+    except ValueError:
+        raise ValueError(f"{name} must be 'auto' or a GPS PRN 1..32, got {v!r}") from None
+    if not 1 <= n <= 32:
+        raise ValueError(f"{name} must be 'auto' or a GPS PRN 1..32, got {v!r}")
+    return n
+
+
+def parse_bool(name, v):
+    if isinstance(v, bool):
+        return v
+    s = str(v).strip().lower()
+    if s in ("1", "true", "yes", "on"):
+        return True
+    if s in ("0", "false", "no", "off"):
+        return False
+    raise ValueError(f"{name} must be true or false, got {v!r}")
+
+
+def sop_order(n_towers):
+    """Tower indices (azimuth order of the scenario) in SOP numbering: carrier A's towers
+    first, then B, then C; and each tower's carrier (tower j -> carrier j mod 3)."""
+    carrier = [CARRIERS[j % 3] for j in range(n_towers)]
+    order = [j for c in CARRIERS for j in range(n_towers) if carrier[j] == c]
+    return np.asarray(order), carrier
+
+
+def synthesize(params, seed, scenario=None):
+    """(EpochGeometry, pseudorange_m, correction_m, description) for the study's inputs."""
+    if params["recording"] != "none":
+        m = gnss_scenario.from_recording(load_recording(params["recording"]), params["mask_deg"])
+        return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}"
+    scenario = scenario or geometry.uav_seed004()
+    n_tw = int(scenario.towers_enu_m.shape[0])
+    _, carrier = sop_order(n_tw)
+    source, desc, real = resolve_sky(params["nav"])
+    if real:
+        from studies.seed004_common import _day_start
+        day = _day_start(source, True)
+    else:
+        day = float(gpstime.gps_seconds(2022, 1, 1))
+    t0 = day + 3600.0 * params["start_h"]
+    t = gnss_scenario.epoch_times(FLIGHT_S, params["n_epochs"])
+    geom = gnss_scenario.scenario_geometry(scenario, t, t0, source, desc, real,
+                                           params["mask_deg"], carrier)
+    noise = draw_noise(geom, seed, params["sigma_ura_gps_m"], params["sigma_lte_noise_m"])
+    pr = gnss_scenario.pseudoranges(geom, noise)
+    return geom, pr, np.where(geom.valid, geom.tx_clock_m, 0.0), desc
+
+
+def draw_noise(geom, seed, sigma_ura_gps_m, sigma_lte_m):
+    """Noise (T, L): GPS N(0, C_acc(el)), towers N(0, sigma_lte^2); epoch k from
+    fold_in(key(seed), k)."""
+    keys = jax.vmap(lambda k: jax.random.fold_in(jax.random.key(int(seed)), k))(
+        jnp.arange(geom.t_s.size, dtype=jnp.uint32))
+    n = np.asarray(jax.vmap(lambda k: jax.random.normal(k, (geom.valid.shape[1],)))(keys))
+    _, var_acc = gnss_variances(geom.el_rad, sigma_ura_gps_m)
+    sig = np.where(geom.is_gps, np.sqrt(np.asarray(var_acc)), sigma_lte_m)
+    return np.where(geom.valid, sig * n, 0.0)
+
+
+def model_variances(geom, params):
+    """C_int, C_acc (T, L): GPS ADD model at the elevation, SOP sigma_URA^S (URE = URA)."""
+    vi_g, va_g = (np.asarray(a) for a in gnss_variances(geom.el_rad, params["sigma_ura_gps_m"]))
+    vi_s, va_s = (float(a) for a in sop_variances(params["sigma_ura_sop_m"]))
+    var_int = np.where(geom.is_gps, vi_g, vi_s)
+    var_acc = np.where(geom.is_gps, va_g, va_s)
+    return np.where(geom.valid, var_int, 1.0), np.where(geom.valid, var_acc, 1.0)
+
+
+def labels(geom):
+    """Clock groups: GPS 0, then each carrier in order of first appearance."""
+    names = [g for g in dict.fromkeys(geom.group.tolist()) if g != "GPS"]
+    lab = np.asarray([0 if g == "GPS" else 1 + names.index(g) for g in geom.group], np.int32)
+    return lab, ["GPS"] + names
+
+
+def _blocks(n_t, size):
+    for start in range(0, n_t, size):
+        yield start, np.minimum(np.arange(start, start + size), n_t - 1), min(size, n_t - start)
+
+
+class Seed004Uav(Study):
+    name = "seed004-uav"
+    title = "Seed 004 section VII: UAV, GPS + up to 11 LTE towers, OARAIM HPE/HPL (Figs. 6-9)"
+    seed_file = "004_55e51818ceb3e5a9.txt"
+    realization = ("one epoch of the flight (n_epochs epochs uniform over 220 s; "
+                   "--realizations N: the first N)")
+    default_realizations = PUBLISHED_EPOCHS
+    quick_realizations = PUBLISHED_EPOCHS
+    test_realizations = 400
+    params = {
+        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (brdc0010.22n from OARAIM_DATA, else "
+                     "nominal), 'nominal', or a RINEX navigation file"),
+        "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the take-off, hours of the "
+                         "file's day (our choice: 10:00 local)", "h"),
+        "n_epochs": Param(PUBLISHED_EPOCHS, count(10, 100000),
+                          "epochs over the 220 s flight (seed 004: 2880)"),
+        "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 004 VII-B)",
+                          "deg"),
+        "sigma_ura_gps_m": Param(1.0, positive, "GPS sigma_URA (Table I)", "m"),
+        "b_nom_m": Param(0.75, non_negative, "GPS nominal bias (Table I)", "m"),
+        "p_sat": Param(1e-5, probability, "GPS P_s (Table I)"),
+        "p_const": Param(1e-8, probability, "GPS P_const (Table I)"),
+        "sigma_ura_sop_m": Param(3.0, positive, "SOP sigma_URA^S (seed 004 VII-D: 3 m)", "m"),
+        "p_s_sop": Param(1e-4, probability, "SOP P_s^S (seed 004 VII-A: 1e-4)"),
+        "p_const_sop": Param(1e-4, probability, "SOP P_const^S per carrier (Table I)"),
+        "sigma_lte_noise_m": Param(2.0, positive, "LTE pseudorange noise of the synthesis "
+                                   "(scenario: meter-level LTE ranging)", "m"),
+        "fault_prn": Param("auto", parse_prn, "GPS PRN of the Fig. 7 ramp ('auto': 8 if in "
+                           "view the whole flight, else the lowest such PRN)"),
+        "fault_onset_s": Param(100.0, in_range(0.0, 1e4), "onset of the Fig. 7 ramp", "s"),
+        "fault_ramp_mps": Param(0.5, positive, "slope of the Fig. 7 bias ramp", "m/s"),
+        "exclusion": Param(True, parse_bool, "GPS + all SOPs also with detect_and_exclude "
+                           "(~2 min per 2880 epochs on 2 CPU cores)"),
+        "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagrams "
+                       "(LPV-200)", "m"),
+        "recording": Param("none", parse_recording, "replay a recorded flight (folder in the "
+                           "geometry.recording format) instead of synthesizing"),
+        "chunk": Param(BLOCK, count(1), "accepted for the common interface and ignored "
+                       f"(fixed blocks of {BLOCK} epochs)"),
+    }
+
+    def run(self, params, realizations, seed, progress):
+        geom, pr, corr, desc = synthesize(params, seed)
+        n_t = min(int(realizations), geom.t_s.size)
+        sl = slice(0, n_t)
+        geom = geom._replace(**{k: getattr(geom, k)[sl] for k in (
+            "t_s", "t_gps_s", "truth_m", "tx_pos_m", "range_m", "valid", "el_rad", "tx_clock_m",
+            "rx_clock_m")})
+        pr, corr = pr[sl], corr[sl]
+        var_int, var_acc = model_variances(geom, params)
+        cons, group_names = labels(geom)
+        n_c = len(group_names)
+        p_const = np.array([params["p_const"]] + [params["p_const_sop"]] * (n_c - 1))
+        p_sat = np.where(geom.is_gps, params["p_sat"], params["p_s_sop"])
+        b_nom = np.where(geom.is_gps, params["b_nom_m"], 0.0)
+        is_tw = ~geom.is_gps
+        tw_idx = np.flatnonzero(is_tw)
+        # SOP numbering: by clock group (carrier A first), then tower order; for a synthesized
+        # flight this is sop_order(); a recording is numbered the same way by its groups
+        order = np.argsort(cons[tw_idx], kind="stable")
+        n_sop_max = tw_idx.size
+        configs = list(range(n_sop_max + 1))
+        x0 = np.broadcast_to(geom.origin_ecef_m, (n_t, 3))
+        res = {"hpl": np.full((len(configs), n_t), np.inf), "hpe": np.full((len(configs), n_t),
+                                                                           np.inf),
+               "vpl": np.full((len(configs), n_t), np.inf)}
+        orders = []
+        for ci, n in enumerate(configs):
+            use = geom.valid & (geom.is_gps | np.isin(np.arange(geom.valid.shape[1]),
+                                                      tw_idx[order[:n]]))[None]
+            hpl, vpl, hpe, mo = self._config(geom, pr, corr, var_int, var_acc, use, cons,
+                                             p_sat, b_nom, p_const, x0)
+            res["hpl"][ci], res["vpl"][ci], res["hpe"][ci] = hpl, vpl, hpe
+            orders.append(mo)
+            if progress is not None:
+                progress.advance(0)
+        excl = self._exclusion(geom, pr, corr, var_int, var_acc, cons, p_sat, b_nom, p_const,
+                               x0, params) if params["exclusion"] else None
+        fault = self._fault(geom, pr, corr, var_int, var_acc, cons, p_sat, b_nom, p_const, x0,
+                            tw_idx[order[:1]], params)
+        if progress is not None:
+            progress.advance(int(realizations))
+        return self._result(params, geom, desc, configs, res, orders, excl, fault,
+                            [str(geom.ids[tw_idx[j]]) for j in order], group_names, cons)
+
+    # ----------------------------------------------------------------- pieces
+    def _config(self, geom, pr, corr, var_int, var_acc, use, cons, p_sat, b_nom, p_const, x0):
+        n_t = use.shape[0]
+        r = snapshot.replay(pr, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
+                            correction_m=corr, constellation=cons, p_const=p_const, x0_m=x0,
+                            monitors=("slope",))
+        used = np.asarray(r.used)
+        g = np.asarray(r.g_enu)
+        mo = int(required_order(jnp.asarray(used), jnp.asarray(np.broadcast_to(cons, used.shape)),
+                                jnp.asarray(np.broadcast_to(p_sat, used.shape)),
+                                jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
+                                BUDGET_SEED004_TABLE_I.p_thresh))
+        hpl = np.full(n_t, np.inf)
+        vpl = np.full(n_t, np.inf)
+        for start, idx, n in _blocks(n_t, BLOCK):
+            pl = araim.protection_levels(
+                g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx], var_acc[idx],
+                np.broadcast_to(b_nom, (idx.size, b_nom.size)),
+                np.broadcast_to(p_sat, (idx.size, p_sat.size)),
+                np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
+                valid=used[idx], max_order=mo)
+            hpl[start:start + n] = np.asarray(pl.hpl_m)[:n]
+            vpl[start:start + n] = np.asarray(pl.vpl_m)[:n]
+        ok = np.asarray(r.wnls.status) == 0
+        return (np.where(ok, hpl, np.inf), np.where(ok, vpl, np.inf), np.asarray(r.hpe_m), mo)
+
+    def _exclusion(self, geom, pr, corr, var_int, var_acc, cons, p_sat, b_nom, p_const, x0,
+                   params):
+        n_t = pr.shape[0]
+        use = geom.valid
+        mo = int(required_order(jnp.asarray(use), jnp.asarray(np.broadcast_to(cons, use.shape)),
+                                jnp.asarray(np.broadcast_to(p_sat, use.shape)),
+                                jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
+                                BUDGET_SEED004_TABLE_I.p_thresh))
+        out = {k: np.zeros(n_t) for k in ("hpl", "hpe", "hpl_aiv", "tau")}
+        out["detected"] = np.zeros(n_t, bool)
+        out["n_excluded"] = np.zeros(n_t, np.int16)
+        for start, idx, n in _blocks(n_t, BLOCK_FDE):
+            r = snapshot.replay(pr[idx], geom.tx_pos_m[idx], var_int[idx], var_acc[idx],
+                                use[idx], geom.truth_m[idx], correction_m=corr[idx],
+                                constellation=np.broadcast_to(cons, (idx.size, cons.size)),
+                                p_const=p_const, p_sat=p_sat, b_nom_m=b_nom, x0_m=x0[idx],
+                                max_order=mo, monitors=("mhss",))
+            s = slice(start, start + n)
+            out["hpl"][s] = np.asarray(r.mhss.hpl_m)[:n]
+            out["hpe"][s] = np.asarray(r.mhss.hpe_m)[:n]
+            out["hpl_aiv"][s] = np.asarray(r.mhss.hpl_all_in_view_m)[:n]
+            out["tau"][s] = np.asarray(r.mhss.statistic)[:n]
+            out["detected"][s] = np.asarray(r.mhss.detected)[:n]
+            out["n_excluded"][s] = np.asarray(r.mhss.excluded)[:n].sum(-1)
+        out["max_order"] = mo
+        return out
+
+    def _fault(self, geom, pr, corr, var_int, var_acc, cons, p_sat, b_nom, p_const, x0,
+               sop1, params):
+        """Fig. 7: the fault mode of one GPS satellite under a bias ramp, GPS only vs + SOP 1."""
+        n_t = pr.shape[0]
+        gps = np.flatnonzero(geom.is_gps)
+        always = [j for j in gps if geom.valid[:, j].all()]
+        prn = {j: int(str(geom.ids[j])[1:]) for j in always}
+        if params["fault_prn"] == "auto":
+            j = next((k for k in always if prn[k] == 8), always[0] if always else None)
+        else:
+            j = next((k for k in always if prn[k] == params["fault_prn"]), None)
+            if j is None:
+                raise ValueError(f"fault_prn={params['fault_prn']} is not in view above the mask "
+                                 "for the whole flight; choose one of "
+                                 f"{sorted(prn.values())}")
+        if j is None:
+            raise ValueError("no GPS satellite is in view for the whole flight")
+        bias = np.where(geom.t_s >= params["fault_onset_s"],
+                        params["fault_ramp_mps"] * (geom.t_s - params["fault_onset_s"]), 0.0)
+        prf = pr.copy()
+        prf[:, j] += bias
+        out = {"prn": prn[j], "bias_m": bias}
+        for tag, extra in (("gps", []), ("sop1", list(sop1))):
+            use = geom.valid & (geom.is_gps | np.isin(np.arange(pr.shape[1]), extra))[None]
+            r = snapshot.replay(prf, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
+                                correction_m=corr, constellation=cons, p_const=p_const,
+                                x0_m=x0, monitors=("slope",))
+            used = np.asarray(r.used)
+            mo = int(required_order(jnp.asarray(used),
+                                    jnp.asarray(np.broadcast_to(cons, used.shape)),
+                                    jnp.asarray(np.broadcast_to(p_sat, used.shape)),
+                                    jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
+                                    BUDGET_SEED004_TABLE_I.p_thresh))
+            sep = np.zeros((n_t, 3))
+            thr = np.zeros((n_t, 3))
+            tau_mode = np.zeros(n_t)
+            tau_max = np.zeros(n_t)
+            det = np.zeros(n_t, bool)
+            g = np.asarray(r.g_enu)
+            y = np.asarray(r.wnls.residual_m)
+            for start, idx, n in _blocks(n_t, BLOCK):
+                s = solution_separation(
+                    g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx],
+                    var_acc[idx], np.broadcast_to(b_nom, (idx.size, b_nom.size)),
+                    np.broadcast_to(p_sat, (idx.size, p_sat.size)),
+                    np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
+                    y[idx], valid=used[idx], max_order=mo)
+                ex = np.asarray(s.excluded)[:n]  # (n, K, L)
+                target = np.zeros(ex.shape[-1], bool)
+                target[j] = True
+                k = np.argmax(np.all(ex == target, -1) & np.asarray(s.monitored)[:n], -1)
+                rows = np.arange(n)
+                sl = slice(start, start + n)
+                sep[sl] = np.abs(np.asarray(s.separation_m)[:n][rows, k])
+                thr[sl] = np.asarray(s.threshold_m)[:n][rows, k]
+                tau = np.asarray(s.tau)[:n]
+                tau_mode[sl] = np.max(tau[rows, k], -1)
+                tau_max[sl] = np.max(np.where(np.isfinite(tau), tau, 0.0), axis=(-2, -1))
+                det[sl] = np.asarray(s.detected)[:n]
+            after = geom.t_s >= params["fault_onset_s"]
+            first = np.flatnonzero(det & after)
+            first_mode = np.flatnonzero((tau_mode > 1) & after)
+            out[tag] = {"sep": sep, "thr": thr, "tau_mode": tau_mode, "tau_max": tau_max,
+                        "detected": det, "max_order": mo,
+                        "t_detect": float(geom.t_s[first[0]]) if first.size else float("inf"),
+                        "t_detect_mode": (float(geom.t_s[first_mode[0]]) if first_mode.size
+                                          else float("inf")),
+                        "false_alarms_before": int(np.sum(det & ~after))}
+        return out
+
+    # ----------------------------------------------------------------- result
+    def _result(self, params, geom, desc, configs, res, orders, excl, fault, sop_ids,
+                group_names, cons):
+        n_t = geom.t_s.size
+        hpl, hpe = res["hpl"], res["hpe"]
+        fin = np.all(np.isfinite(hpl), 0)
+        share_fin = float(np.mean(fin))
+        mean = lambda a: float(np.mean(a[fin])) if fin.any() else float("inf")  # noqa: E731
+        mean_hpl = {n: mean(hpl[i]) for i, n in enumerate(configs)}
+        red = {n: mean(hpl[0] - hpl[i]) for i, n in enumerate(configs)}
+        raise1 = float(np.mean((hpl[1] > hpl[0])[fin])) if fin.any() and len(configs) > 1 \
+            else float("nan")
+        n_all = configs[-1]
+        mi = {n: int(np.sum(np.isfinite(hpl[i]) & (hpe[i] > hpl[i]))) for i, n in
+              enumerate(configs)}
+        hal = params["hal_m"]
+        normal_all = float(np.mean((hpe[-1] <= hpl[-1]) & (hpl[-1] <= hal)))
+        f_gps, f_sop = fault["gps"], fault["sop1"]
+        sep_diff = float(np.max(np.abs(f_gps["sep"] - f_sop["sep"])))
+        thr_ratio = float(np.median(f_sop["thr"][:, :2] / f_gps["thr"][:, :2]))
+        coords = {"epoch": np.arange(n_t), "n_sops": np.asarray(configs), "axis": ["e", "n", "u"]}
+        data = {"t_s": ("epoch", geom.t_s), "hpl_m": (("n_sops", "epoch"), hpl),
+                "vpl_m": (("n_sops", "epoch"), res["vpl"]), "hpe_m": (("n_sops", "epoch"), hpe),
+                "fault_bias_m": ("epoch", fault["bias_m"]),
+                "n_gps": ("epoch", np.sum(geom.valid & geom.is_gps, -1))}
+        for tag in ("gps", "sop1"):
+            f = fault[tag]
+            data[f"fault_sep_{tag}_m"] = (("epoch", "axis"), f["sep"])
+            data[f"fault_thr_{tag}_m"] = (("epoch", "axis"), f["thr"])
+            data[f"fault_tau_{tag}"] = ("epoch", f["tau_mode"])
+            data[f"fault_tau_max_{tag}"] = ("epoch", f["tau_max"])
+            data[f"fault_detected_{tag}"] = ("epoch", f["detected"])
+        if excl is not None:
+            data.update({"hpl_excl_m": ("epoch", excl["hpl"]), "hpe_excl_m": ("epoch", excl["hpe"]),
+                         "hpl_excl_aiv_m": ("epoch", excl["hpl_aiv"]),
+                         "mhss_max_tau": ("epoch", excl["tau"]),
+                         "mhss_detected": ("epoch", excl["detected"]),
+                         "n_excluded": ("epoch", excl["n_excluded"])})
+        ds = xr.Dataset(data, coords=coords, attrs={
+            "sky_source": desc, "real_ephemeris": int(geom.real_ephemeris), "hal_m": hal,
+            "fault_prn": fault["prn"], "fault_onset_s": params["fault_onset_s"],
+            "fault_ramp_mps": params["fault_ramp_mps"], "sop_order": ",".join(sop_ids),
+            "t_detect_gps_s": f_gps["t_detect"], "t_detect_sop1_s": f_sop["t_detect"],
+            "exclusion": int(excl is not None)})
+        hpl_fig6 = excl["hpl"] if excl is not None else hpl[-1]
+        hpe_fig6 = excl["hpe"] if excl is not None else hpe[-1]
+        mi6 = int(np.sum(np.isfinite(hpl_fig6) & (hpe_fig6 > hpl_fig6)))
+        note = (f"{n_t} epochs, sky: {desc}; sigma_URA^S = {params['sigma_ura_sop_m']:g} m, "
+                f"P_s^S = {params['p_s_sop']:g}; synthetic flight, not tuned")
+        rows = [
+            {"quantity": "epochs of the flight", "unit": "count", "published": PUBLISHED_EPOCHS,
+             "reproduced": n_t, "note": "2880 epochs uniform over 220 s (13.09 Hz, our reading)"},
+            {"quantity": f"misleading-information epochs (HPE > HPL), GPS + {n_all} SOPs (Fig. 6)",
+             "unit": "count", "published": 0, "reproduced": mi6,
+             "note": ("MHSS with detect_and_exclude, solution kept" if excl is not None
+                      else "all-in-view MHSS") + "; " + note},
+            {"quantity": f"epochs in normal operation (HPE <= HPL <= HAL {hal:g} m), GPS + "
+                         f"{n_all} SOPs (Fig. 9)", "unit": "%", "published": 100.0,
+             "reproduced": 100.0 * normal_all, "note": "all-in-view MHSS"},
+            {"quantity": "+1 SOP raises the HPL (Fig. 8, Theorem 2): share of epochs",
+             "unit": "%", "published": None, "reproduced": 100.0 * raise1,
+             "note": "seed: 'adding one SOP slightly increases the HPL' (no number)"},
+            {"quantity": "mean HPL reduction, +1 SOP (Fig. 8)", "unit": "m", "published": None,
+             "reproduced": red.get(1, float("nan")), "note": "negative = HPL raised"},
+            {"quantity": "mean HPL reduction, +2 SOPs (Fig. 8)", "unit": "m", "published": None,
+             "reproduced": red.get(2, float("nan")), "note": "seed: two or more SOPs reduce"},
+            {"quantity": "mean HPL reduction, +8 SOPs (Fig. 8)", "unit": "m", "published": None,
+             "reproduced": red.get(8, float("nan")), "note": ""},
+            {"quantity": f"+1 SOP changes the fault-mode statistic of PRN {fault['prn']} "
+                         "(Fig. 7a, Theorem 1): max |difference|", "unit": "m", "published": 0.0,
+             "reproduced": sep_diff, "note": "seed: 'does not change the test statistics'"},
+            {"quantity": "+1 SOP: threshold ratio (E, N; median) (Fig. 7a)", "unit": "-",
+             "published": None, "reproduced": thr_ratio,
+             "note": "seed: 'increases the test threshold' (> 1)"},
+            {"quantity": f"detection time of the PRN {fault['prn']} ramp, GPS only", "unit": "s",
+             "published": None, "reproduced": f_gps["t_detect"],
+             "note": (f"ramp {params['fault_ramp_mps']:g} m/s from "
+                      f"{params['fault_onset_s']:g} s; any tau > 1")},
+            {"quantity": f"detection time of the PRN {fault['prn']} ramp, GPS + SOP 1",
+             "unit": "s", "published": None, "reproduced": f_sop["t_detect"],
+             "note": "Theorem 1: later (less sensitive) with one SOP"},
+        ]
+        metrics = {
+            "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris), "epochs": n_t,
+            "gps_visible_min": int(data["n_gps"][1].min()),
+            "gps_visible_max": int(data["n_gps"][1].max()),
+            "sop_order": sop_ids, "carriers": group_names[1:],
+            "share_epochs_all_hpl_finite": share_fin,
+            "mean_hpl_m": {str(n): v for n, v in mean_hpl.items()},
+            "mean_hpl_reduction_m": {str(n): v for n, v in red.items()},
+            "share_epochs_hpl_reduced": {str(n): float(np.mean((hpl[i] < hpl[0])[fin]))
+                                         for i, n in enumerate(configs)},
+            "misleading_information_epochs": {str(n): v for n, v in mi.items()},
+            "mhss_max_order": {str(n): v for n, v in zip(configs, orders, strict=True)},
+            "median_hpe_m": {str(n): float(np.median(hpe[i])) for i, n in enumerate(configs)},
+            "max_hpe_m": {str(n): float(np.max(hpe[i])) for i, n in enumerate(configs)},
+            "fault_prn": fault["prn"], "fault_onset_s": params["fault_onset_s"],
+            "fault_ramp_mps": params["fault_ramp_mps"],
+            "detection_time_gps_s": f_gps["t_detect"],
+            "detection_time_sop1_s": f_sop["t_detect"],
+            "detection_time_mode_gps_s": f_gps["t_detect_mode"],
+            "detection_time_mode_sop1_s": f_sop["t_detect_mode"],
+            "false_alarms_before_onset_gps": f_gps["false_alarms_before"],
+            "false_alarms_before_onset_sop1": f_sop["false_alarms_before"],
+            "fault_statistic_max_abs_difference_m": sep_diff,
+            "fault_threshold_ratio_median": thr_ratio,
+            "fault_tau_reduction_median": float(np.median(f_gps["tau_mode"] - f_sop["tau_mode"])),
+        }
+        if excl is not None:
+            metrics.update({
+                "exclusion_max_order": excl["max_order"],
+                "exclusion_detections": int(excl["detected"].sum()),
+                "exclusion_epochs_with_exclusion": int(np.sum(excl["n_excluded"] > 0)),
+                "exclusion_mean_hpl_m": float(np.mean(excl["hpl"][np.isfinite(excl["hpl"])]))
+                if np.isfinite(excl["hpl"]).any() else float("inf"),
+                "exclusion_misleading_information_epochs": mi6})
+        return StudyResult(ds, rows, metrics, extra_provenance={
+            "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris),
+            "recording": params["recording"]})
+
+    # ----------------------------------------------------------------- plots
+    def plot(self, out_dir):
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
+        a = ds.attrs
+        t = ds["t_s"].values
+        n_sops = ds["n_sops"].values
+        hpl, hpe = ds["hpl_m"].values, ds["hpe_m"].values
+        files = []
+        # Fig. 6
+        fig, ax = plt.subplots(figsize=(7, 3.6))
+        if "hpl_excl_m" in ds:
+            ax.plot(t, ds["hpl_excl_m"].values, color="tab:red", lw=1,
+                    label="HPL (MHSS, detection and exclusion)")
+            ax.plot(t, ds["hpe_excl_m"].values, color="tab:blue", lw=0.8, label="HPE")
+        else:
+            ax.plot(t, hpl[-1], color="tab:red", lw=1, label="HPL (MHSS all-in-view)")
+            ax.plot(t, hpe[-1], color="tab:blue", lw=0.8, label="HPE")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("m")
+        ax.set_title(f"Seed 004 Fig. 6: GPS + {n_sops[-1]} SOPs ({a['sky_source']})", fontsize=8)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(f"{out_dir}/fig6_hpe_hpl.png", dpi=130)
+        plt.close(fig)
+        files.append("fig6_hpe_hpl.png")
+        # Fig. 7
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.4), sharex=True)
+        ratio = (ds["fault_sep_gps_m"].values[:, :2]
+                 / np.maximum(ds["fault_thr_gps_m"].values[:, :2], 1e-9))
+        q = int(np.argmax(np.max(ratio, 0)))  # the horizontal axis with the largest tau
+        lab = "EN"[q]
+        a1.plot(t, ds["fault_sep_gps_m"].values[:, q], color="tab:blue", lw=1.6,
+                label=f"|dx_{lab}| GPS only")
+        a1.plot(t, ds["fault_sep_sop1_m"].values[:, q], color="tab:orange", ls="--", lw=1,
+                label=f"|dx_{lab}| GPS + SOP 1")
+        a1.plot(t, ds["fault_thr_gps_m"].values[:, q], color="tab:blue", lw=0.8, ls=":",
+                label="threshold GPS only")
+        a1.plot(t, ds["fault_thr_sop1_m"].values[:, q], color="tab:orange", lw=0.8, ls="-.",
+                label="threshold GPS + SOP 1")
+        a1.set_ylabel("m")
+        a1.set_title(f"Seed 004 Fig. 7: PRN {a['fault_prn']} fault mode, ramp "
+                     f"{a['fault_ramp_mps']:g} m/s from {a['fault_onset_s']:g} s; detected at "
+                     f"{a['t_detect_gps_s']:.1f} s (GPS) vs {a['t_detect_sop1_s']:.1f} s (+SOP 1)",
+                     fontsize=8)
+        a1.legend(fontsize=7)
+        a2.plot(t, ds["fault_tau_gps"].values - ds["fault_tau_sop1"].values, color="k", lw=0.8)
+        a2.set_ylabel("tau GPS - tau GPS+SOP 1")
+        a2.set_xlabel("time (s)")
+        fig.tight_layout()
+        fig.savefig(f"{out_dir}/fig7_detection_sensitivity.png", dpi=130)
+        plt.close(fig)
+        files.append("fig7_detection_sensitivity.png")
+        # Fig. 8
+        fig, ax = plt.subplots(figsize=(7, 3.8))
+        cmap = plt.get_cmap("viridis")
+        for i, n in enumerate(n_sops):
+            if 1 <= n <= 8:
+                ax.plot(t, hpl[0] - hpl[i], lw=0.9, color=cmap((n - 1) / 7), label=f"{n} SOPs")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("HPL reduction (m)")
+        ax.set_title("Seed 004 Fig. 8: HPL(GPS) - HPL(GPS + n SOPs)", fontsize=9)
+        ax.legend(fontsize=7, ncol=4)
+        fig.tight_layout()
+        fig.savefig(f"{out_dir}/fig8_hpl_reduction.png", dpi=130)
+        plt.close(fig)
+        files.append("fig8_hpl_reduction.png")
+        # Fig. 9
+        sel = [i for i, n in enumerate(n_sops) if n in STANFORD_SOPS]
+        fig, axes = plt.subplots(1, len(sel), figsize=(3.0 * len(sel), 3.2), squeeze=False)
+        hal = float(a["hal_m"])
+        top = max(hal * 1.5, float(np.nanmax(np.where(np.isfinite(hpl), hpl, 0))) * 1.1)
+        for ax, i in zip(axes[0], sel, strict=True):
+            h = np.minimum(hpl[i], top)
+            e = np.minimum(hpe[i], top)
+            mi = int(np.sum(hpe[i] > hpl[i]))
+            ax.plot([0, top], [0, top], "k", lw=0.6)
+            ax.axvline(hal, color="r", lw=0.6)
+            ax.axhline(hal, color="r", lw=0.6)
+            ax.plot(e, h, ".", ms=1.5, alpha=0.5)
+            ax.set_xlim(0, top)
+            ax.set_ylim(0, top)
+            ax.set_title(f"GPS + {n_sops[i]} SOPs: MI {mi}", fontsize=8)
+            ax.set_xlabel("HPE (m)", fontsize=8)
+        axes[0][0].set_ylabel("HPL (m)")
+        fig.suptitle("Seed 004 Fig. 9: Stanford diagrams (MHSS all-in-view)", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(f"{out_dir}/fig9_stanford.png", dpi=130)
+        plt.close(fig)
+        files.append("fig9_stanford.png")
+        return files
