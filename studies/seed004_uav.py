@@ -400,7 +400,8 @@ class Seed004Uav(Study):
         f_gps, f_sop = fault["gps"], fault["sop1"]
         sep_diff = float(np.max(np.abs(f_gps["sep"] - f_sop["sep"])))
         thr_ratio = float(np.median(f_sop["thr"][:, :2] / f_gps["thr"][:, :2]))
-        coords = {"epoch": np.arange(n_t), "n_sops": np.asarray(configs), "axis": ["e", "n", "u"]}
+        # axis 0 east, 1 north, 2 up (integers: a string coordinate has no Zarr v3 encoding)
+        coords = {"epoch": np.arange(n_t), "n_sops": np.asarray(configs), "axis": np.arange(3)}
         data = {"t_s": ("epoch", geom.t_s), "hpl_m": (("n_sops", "epoch"), hpl),
                 "vpl_m": (("n_sops", "epoch"), res["vpl"]), "hpe_m": (("n_sops", "epoch"), hpe),
                 "fault_bias_m": ("epoch", fault["bias_m"]),
