@@ -351,13 +351,15 @@ def simulate_drive(key, setup: DriveSetup, sigma_pr_m=2.0, mp_sigma_m=0.0, mp_ta
         w_clk = w[n_sub * 12:n_sub * 12 + 2]
         w_mp = w[n_sub * 12 + 2:n_sub * 12 + 2 + n_t]
         w_pr = w[n_sub * 12 + 2 + n_t:]
-        gm, am = [], []
-        for j in range(n_sub):
-            gj, aj, bg, ba = imu.imu_sample_normals(w_imu[j], g_true[j], a_true[j], bg, ba, sp,
-                                                    p.dt_s)
-            gm.append(gj)
-            am.append(aj)
-        gm, am = jnp.stack(gm), jnp.stack(am)
+
+        def imu_step(b, x):
+            # a scan, not an unrolled loop: unrolled, XLA fused the whole bias chain into every
+            # sample's fusion (quadratic recomputation, ~15 % of the run time)
+            wj, gt, at = x
+            gj, aj, bgj, baj = imu.imu_sample_normals(wj, gt, at, b[0], b[1], sp, p.dt_s)
+            return (bgj, baj), (gj, aj)
+
+        (bg, ba), (gm, am) = jax.lax.scan(imu_step, (bg, ba), (w_imu, g_true, a_true))
         clk = clocks.clock_step_normals(w_clk, clk, dt_meas, p.s_wdt_s, p.s_wdtdot_per_s)
         phi_mp = jnp.exp(-dt_meas / mp_tau_s)
         mp = phi_mp * mp + mp_sigma_m * jnp.sqrt(1.0 - phi_mp**2) * w_mp
