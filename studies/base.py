@@ -37,6 +37,16 @@ def in_range(lo, hi):
     return lambda name, v: check_range(name, v, lo, hi)
 
 
+def check_bpp_annulus(p):
+    """Cross-checks of the BPP parameters: d_min_m < d_max_m and h_min_m <= h_max_m."""
+    if p["d_min_m"] >= p["d_max_m"]:
+        raise ValueError(f"d_min_m must be < d_max_m, got d_min_m={p['d_min_m']} and "
+                         f"d_max_m={p['d_max_m']}")
+    if p["h_min_m"] > p["h_max_m"]:
+        raise ValueError(f"h_min_m must be <= h_max_m, got h_min_m={p['h_min_m']} and "
+                         f"h_max_m={p['h_max_m']}")
+
+
 def axis(parse_one):
     """Parser of a sweep axis parameter: ``"2,3,4"``, a scalar, or a list/tuple -> a non-empty
     tuple of values without duplicates, each parsed by ``parse_one(name, v)`` (e.g.

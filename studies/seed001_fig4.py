@@ -30,6 +30,7 @@ from studies.base import (
     Param,
     Study,
     StudyResult,
+    check_bpp_annulus,
     count,
     in_range,
     non_negative,
@@ -110,12 +111,7 @@ class Fig4HplCdf(Study):
     }
 
     def check(self, p):
-        if p["d_min_m"] >= p["d_max_m"]:
-            raise ValueError(f"d_min_m must be < d_max_m, got d_min_m={p['d_min_m']} and "
-                             f"d_max_m={p['d_max_m']}")
-        if p["h_min_m"] > p["h_max_m"]:
-            raise ValueError(f"h_min_m must be <= h_max_m, got h_min_m={p['h_min_m']} and "
-                             f"h_max_m={p['h_max_m']}")
+        check_bpp_annulus(p)
 
     def run(self, params, realizations, seed, progress):
         dof = params["n_gps"] + params["n_added"] - 4

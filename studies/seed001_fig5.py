@@ -39,6 +39,7 @@ from studies.base import (
     Param,
     Study,
     StudyResult,
+    check_bpp_annulus,
     count,
     in_range,
     non_negative,
@@ -102,15 +103,17 @@ def parse_date(name, v):
     return f"{y:04d}-{m:02d}-{d:02d}"
 
 
-def resolve_sky(nav):
-    """(source, description, is_real_file): DESIGN.md's default-sky rule."""
+def resolve_sky(nav, default_file=VILL_FILE):
+    """(source, description, is_real_file): DESIGN.md's default-sky rule. ``nav`` is 'auto'
+    (``default_file`` under the data folder if present, else the nominal constellation with a
+    warning), 'nominal', or a file path."""
     if nav == "nominal":
         return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008), requested", False
     if nav == "auto":
         d = data_dir()
-        p = None if d is None else d / VILL_FILE
+        p = None if d is None else d / default_file
         if p is None or not p.is_file():
-            warnings.warn(f"{VILL_FILE} not found (OARAIM_DATA / ../shared/data); using the "
+            warnings.warn(f"{default_file} not found (OARAIM_DATA / ../shared/data); using the "
                           "built-in nominal GPS 24-slot constellation instead of real "
                           "ephemerides", stacklevel=2)
             return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008): real file not found", False
@@ -224,12 +227,7 @@ class Fig5Madrid24h(Study):
     }
 
     def check(self, p):
-        if p["d_min_m"] >= p["d_max_m"]:
-            raise ValueError(f"d_min_m must be < d_max_m, got d_min_m={p['d_min_m']} and "
-                             f"d_max_m={p['d_max_m']}")
-        if p["h_min_m"] > p["h_max_m"]:
-            raise ValueError(f"h_min_m must be <= h_max_m, got h_min_m={p['h_min_m']} and "
-                             f"h_max_m={p['h_max_m']}")
+        check_bpp_annulus(p)
 
     def sky(self, params):
         """GPS sky of the run: (t_gps_s, az, el, valid, sky description, real file?)."""

@@ -28,7 +28,6 @@ sensitivity run in results/):
 """
 
 import functools
-import warnings
 from pathlib import Path
 
 import jax
@@ -40,8 +39,16 @@ from araim.budget import BUDGET_SEED004_TABLE_I
 from araim.error_models import gnss_variances, sop_variances
 from araim.mhss import _protection_levels, required_order
 from geometry import gpstime
-from geometry.datafiles import data_dir
-from studies.base import Param, count, in_range, non_negative, positive, probability
+from studies import seed001_fig5 as fig5
+from studies.base import (
+    Param,
+    check_bpp_annulus,
+    count,
+    in_range,
+    non_negative,
+    positive,
+    probability,
+)
 
 #: seed 004 section VI, ECEF metres
 ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)
@@ -93,38 +100,18 @@ def common_params():
     }
 
 
-def check_geometry_params(p):
-    if p["d_min_m"] >= p["d_max_m"]:
-        raise ValueError(f"d_min_m must be < d_max_m, got d_min_m={p['d_min_m']} and "
-                         f"d_max_m={p['d_max_m']}")
-    if p["h_min_m"] > p["h_max_m"]:
-        raise ValueError(f"h_min_m must be <= h_max_m, got h_min_m={p['h_min_m']} and "
-                         f"h_max_m={p['h_max_m']}")
+check_geometry_params = check_bpp_annulus
 
 
 def resolve_sky(nav):
-    """(source for geometry.sky, description, is a real file)."""
-    if nav == "nominal":
-        return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008), requested", False
-    if nav == "auto":
-        d = data_dir()
-        p = None if d is None else d / NAV_FILE
-        if p is None or not p.is_file():
-            warnings.warn(f"{NAV_FILE} not found (OARAIM_DATA / ../shared/data); using the "
-                          "built-in nominal GPS 24-slot constellation instead of real "
-                          "ephemerides", stacklevel=2)
-            return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008): real file not found", False
-        nav = str(p)
-    return nav, f"broadcast ephemeris {Path(nav).name}", True
+    """(source for geometry.sky, description, is a real file): DESIGN.md's default-sky rule
+    with ``NAV_FILE``."""
+    return fig5.resolve_sky(nav, NAV_FILE)
 
 
 def _day_start(source, real):
     if real:
-        eph = geometry.load_navigation(source, systems=("G",))
-        toe = eph._toe_healthy[np.isfinite(eph._toe_healthy)]
-        days = np.floor(toe / gpstime.SECONDS_PER_DAY).astype(np.int64)
-        vals, counts = np.unique(days, return_counts=True)
-        return float(vals[np.argmax(counts)] * gpstime.SECONDS_PER_DAY)
+        return fig5.file_day_start(geometry.load_navigation(source, systems=("G",)))
     return float(gpstime.gps_seconds(*DEFAULT_DAY))
 
 
