@@ -194,14 +194,17 @@ def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_o
     a = lab[srci]  # (T, B) constellation of each mode's resolved source
     cidx = jnp.arange(C)[None, :, None]
     rel = jnp.clip(cidx - (cidx > a[:, None, :]), 0, max(C - 2, 0))  # (T, C, B)
-    tpl_other = jnp.asarray(tpl.other)[:, :, None]
-    other = jnp.take_along_axis(jnp.broadcast_to(tpl_other, tpl_other.shape[:2] + a.shape[-1:]),
-                                rel, axis=1)
+    # Small static axes: selects over them instead of gathers (take_along_axis over the batch
+    # was most of this function's time on CPU)
+    tpl_other = np.asarray(tpl.other)
+    other = jnp.zeros(rel.shape, bool)
+    for j in range(tpl_other.shape[1]):
+        other = other | (jnp.asarray(tpl_other[:, j])[:, None, None] & (rel == j))
     other = other & (cidx != a[:, None, :])
     excl_c = jnp.where(resolved[:, :, None], other, jnp.asarray(tpl.whole)[:, :, None])
 
     all_present = jnp.all(~excl_c | gp.present[None], axis=1)  # (T, B)
-    n_a = jnp.take_along_axis(gp.n_sources, a, axis=0)
+    n_a = sum(jnp.where(a == c, gp.n_sources[c][None], 0) for c in range(C))
     src_ok = valid[srci] & (n_a >= 2)
     live = (all_present & jnp.where(resolved, src_ok, True)
             & (jnp.asarray(tpl.order)[:, None] <= order[None]))
@@ -215,8 +218,9 @@ def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_o
     prior = jnp.where(live, jnp.where(resolved, gp.p_single[srci], 1.0) * prod, 0.0)
 
     # excluded[t, l] = the constellation of l is excluded whole in t, or l is t's source
-    lab_b = jnp.broadcast_to(lab[None], (excl_c.shape[0],) + lab.shape)
-    member_excl = jnp.take_along_axis(excl_c, lab_b, axis=1)  # (T, L, B)
+    member_excl = jnp.zeros((excl_c.shape[0],) + lab.shape, bool)  # (T, L, B)
+    for c in range(C):
+        member_excl = member_excl | (excl_c[:, c][:, None] & (lab == c)[None])
     is_src = jnp.asarray(np.arange(L)[None, :] == src[:, None])[:, :, None]
     excluded = valid[None] & (member_excl | is_src)
     return FaultModes(excluded, excl_c, prior, live, order, p_beyond,
