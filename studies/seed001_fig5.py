@@ -80,7 +80,7 @@ def parse_receiver(name, v):
 
 
 def parse_nav(name, v):
-    """'auto' (Villafranca file if present, else nominal), 'nominal', or a file path."""
+    """'auto' (the study's default file if present, else nominal), 'nominal', or a file path."""
     v = str(v).strip()
     if v in ("auto", "nominal"):
         return v

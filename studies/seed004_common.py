@@ -68,16 +68,8 @@ SIGMA_GRID_M = (0.5, *[float(s) for s in range(1, 26)])
 P_S_GRID = tuple(float(f"{m}e{e}") for e in range(-7, -1) for m in (1, 3)) + (0.1,)
 
 
-def parse_nav(name, v):
-    """'auto' (brdc0010.22n if present, else nominal), 'nominal', or a navigation file."""
-    v = str(v).strip()
-    if v in ("auto", "nominal"):
-        return v
-    p = Path(v).expanduser()
-    if not p.is_file():
-        raise ValueError(f"{name} must be 'auto', 'nominal' or an existing RINEX navigation "
-                         f"file, got {v!r} (not found)")
-    return str(p.resolve())
+#: 'auto' (NAV_FILE if present, else nominal), 'nominal', or a navigation file
+parse_nav = fig5.parse_nav
 
 
 def common_params():
