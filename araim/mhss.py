@@ -57,6 +57,44 @@ def q_function(x):
     return 0.5 * erfc(x * _SQRT1_2)
 
 
+# Cephes ndtr.c coefficients (the ones XLA's erfc uses): erfc(x) = exp(-x^2) P(x) / Q(x) for
+# 1 <= x < 8 (relative error 3e-10 when continued beyond 8, where Q(t) < 1e-29 adds nothing to
+# a PL equation), erf(x) = x T(x^2) / U(x^2) for |x| < 1
+_ERFC_P = (2.46196981473530512524e-10, 5.64189564831068821977e-1, 7.46321056442269912687e0,
+           4.86371970985681366614e1, 1.96520832956077098242e2, 5.26445194995477358631e2,
+           9.34528527171957607540e2, 1.02755188689515710272e3, 5.57535335369399327526e2)
+_ERFC_Q = (1.0, 1.32281951154744992508e1, 8.67072140885989742329e1, 3.54937778887819891062e2,
+           9.75708501743205489753e2, 1.82390916687909736289e3, 2.24633760818710981792e3,
+           1.65666309194161350182e3, 5.57535340817727675546e2)
+_ERF_T = (9.60497373987051638749e0, 9.00260197203842689217e1, 2.23200534594684319226e3,
+          7.00332514112805075473e3, 5.55923013010394962768e4)
+_ERF_U = (1.0, 3.35617141647503099647e1, 5.21357949780152679795e2, 4.59432382970980127987e3,
+          2.26290000613890934246e4, 4.92673942608635921086e4)
+
+
+def _poly(c, x):
+    out = c[0]
+    for a in c[1:]:
+        out = out * x + a
+    return out
+
+
+def q_tail(t):
+    """Q(t) as q_function, for the root finder: two of erfc's three Cephes branches and one
+    division instead of three (about half the cost of jax.scipy.special.erfc on CPU); agrees
+    with q_function to 1e-15 relative wherever Q(t) > 1e-29."""
+    x = jnp.minimum(jnp.abs(t) * _SQRT1_2, 27.0)  # erfc(27) underflows to 0
+    small = x < 1.0
+    z = x * x
+    u = _poly(_ERF_U, z)
+    num = jnp.where(small, u - x * _poly(_ERF_T, z), jnp.exp(-z) * _poly(_ERFC_P, x))
+    neg = t < 0
+    # Q(t) = Q(|t|) or 1 - Q(|t|), written with the division used once: XLA keeps a division
+    # with two users out of the consumer's fusion (one small loop per term, measured 3x slower)
+    return jnp.where(neg, 1.0, 0.0) + jnp.where(neg, -0.5, 0.5) * num / jnp.where(
+        small, u, _poly(_ERFC_Q, x))
+
+
 def q_inverse(p):
     """Q^-1(p) = -Phi^-1(p)."""
     return -ndtri(p)
@@ -95,6 +133,30 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
+def _materialize(x):
+    """Identity (NaN stays NaN) that XLA computes once and stores. XLA's fusion duplicates a
+    cheap elementwise producer into every consumer, also into one that broadcasts it; here that
+    repeated a whole unrolled solve for every element of an (L, L, B) product (measured: most
+    of the kernel). A division is 'expensive' for XLA and is never duplicated that way."""
+    if not jnp.issubdtype(x.dtype, jnp.floating):  # labels and masks: exact through float64
+        y = x.astype(jnp.float64)
+        return (y / (y == y).astype(y.dtype)).astype(x.dtype)
+    return x / (x == x).astype(x.dtype)
+
+
+def _blocks(parts):
+    """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
+    concatenation with the computations of its parts into one loop that branches on every
+    element (measured: a scalar loop, 10x slower than the parts alone); an update slice loops
+    over its part only."""
+    out = jnp.zeros((sum(p.shape[0] for p in parts),) + parts[0].shape[1:], parts[0].dtype)
+    start = 0
+    for p in parts:
+        out = jax.lax.dynamic_update_slice_in_dim(out, p, start, axis=0)
+        start += p.shape[0]
+    return out
+
+
 def _sum(x, axis):
     """Sum over a short static axis written out as elementwise adds: XLA fuses and vectorises
     them over the trailing batch axis, which it does not do for a reduce over a non-minor axis
@@ -117,12 +179,13 @@ def _normal(cols, w, axis):
     return n
 
 
-def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0):
+def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0, return_factor=False):
     """Fault-tolerant solutions of arbitrary exclusion sets, by Cholesky of each normal matrix.
 
     keep (M, L, B); cols: 3 + C arrays (1, L, B); s0: (3, L, B) all-in-view position rows, or
     None to use mode 0 of ``keep`` as the all-in-view. Returns s_pos (M, 3, L, B), var_pos
-    (M, 3, B), bias (M, 3, B), sigma_ss (M, 3, B), nonsingular (M, B).
+    (M, 3, B), bias (M, 3, B), sigma_ss (M, 3, B), nonsingular (M, B), and with
+    ``return_factor`` the Cholesky factors (nested lists of (M, B) arrays) as well.
     """
     n_states = len(cols)
     C = n_states - 3
@@ -133,16 +196,22 @@ def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0):
         n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
     lower, nonsingular = linalg.cholesky(n)
     zero = jnp.zeros_like(n[0][0])
-    y = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0)
-                                       for j in range(n_states)]) for q in range(3)]
+    y = [[_materialize(e) for e in linalg.cholesky_solve(
+        lower, [zero + (1.0 if j == q else 0.0) for j in range(n_states)])] for q in range(3)]
     # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}
     s_pos = jnp.stack([w * sum(y[q][a][:, None, :] * cols[a] for a in range(n_states))
                        for q in range(3)], axis=1)  # (M, 3, L, B)
-    s_pos = jnp.where(nonsingular[:, None, None, :], s_pos, 0.0)
+    s_pos = _materialize(jnp.where(nonsingular[:, None, None, :], s_pos, 0.0))
     var_pos = jnp.stack([y[q][q] for q in range(3)], axis=1)  # (M, 3, B)
-    bias = jnp.sum(jnp.abs(s_pos) * b_nom[None, None], axis=2)
-    d = s_pos - (s_pos[:1] if s0 is None else s0[None])
-    sigma_ss = jnp.sqrt(jnp.sum(d**2 * var_acc[None, None], axis=2))
+    ref = s_pos[:1] if s0 is None else s0[None]
+    bias = 0.0
+    ss2 = 0.0
+    for m in range(w.shape[1]):  # loops over sources: one fused (M, 3, B) loop each
+        bias = bias + jnp.abs(s_pos[:, :, m]) * b_nom[m]
+        ss2 = ss2 + (s_pos[:, :, m] - ref[:, :, m]) ** 2 * var_acc[m]
+    bias, sigma_ss = _materialize(bias), _materialize(jnp.sqrt(ss2))
+    if return_factor:
+        return s_pos, var_pos, bias, sigma_ss, nonsingular, lower
     return s_pos, var_pos, bias, sigma_ss, nonsingular
 
 
@@ -151,9 +220,13 @@ def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0):
 SINGLE_REDUNDANCY_TOLERANCE = 1e-9
 
 
-def _single_modes(w_int, cols, b_nom, var_acc, lower0):
-    """All-in-view and every single-source exclusion from ONE Cholesky factor (rank-one
-    downdates, Sherman-Morrison; DESIGN.md performance notes).
+def _single_modes(w_int, cols, b_nom, var_acc, lower0, var0):
+    """Every single-source exclusion from the all-in-view Cholesky factor ``lower0`` (nested
+    lists of (B,) arrays) and variances var0 (3, B) by rank-one downdates (Sherman-Morrison;
+    DESIGN.md performance notes). u_l is solved from the factor, not multiplied by an explicit
+    inverse: the worst subsets here have condition numbers ~1e8.
+    u_l is stored once (``_materialize``): left to itself XLA fused the whole solve into every
+    element of the (L, L, B) products below (13x recomputation, most of the kernel).
 
     With u_l = N0^-1 h_l, P_lm = h_l^T N0^-1 h_m and r_l = 1 - w_l P_ll:
         N_l^-1 = N0^-1 + w_l u_l u_l^T / r_l
@@ -164,28 +237,35 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0):
     """
     n_states = len(cols)
     L = w_int.shape[0]
+    h = [c[0] for c in cols]  # (L, B)
     lower_l = [[None if e is None else e[None] for e in row] for row in lower0]
-    u = linalg.cholesky_solve(lower_l, [c[0] for c in cols])  # n arrays (L, B): N0^-1 h_l
-    zero = jnp.zeros_like(lower0[0][0])
-    e = [linalg.cholesky_solve(lower0, [zero + (1.0 if j == q else 0.0)
-                                        for j in range(n_states)]) for q in range(3)]
-    var0 = jnp.stack([e[q][q] for q in range(3)], axis=0)  # (3, B)
-    p = sum(cols[a][0][:, None, :] * u[a][None, :, :] for a in range(n_states))  # (L, L, B)
+    u = [_materialize(x) for x in linalg.cholesky_solve(lower_l, h)]  # n (L, B): N0^-1 h_l
+    p = sum(h[a][:, None, :] * u[a][None, :, :] for a in range(n_states))  # (L, L, B)
     s0 = jnp.stack([w_int * u[q] for q in range(3)], axis=0)  # (3, L, B)
-    p_ll = jnp.diagonal(p, axis1=0, axis2=1).T  # (L, B)
+    p_ll = sum(h[a] * u[a] for a in range(n_states))  # (L, B)
     r = 1.0 - w_int * p_ll
     ok = r > SINGLE_REDUNDANCY_TOLERANCE
     r_safe = jnp.where(ok, r, 1.0)
     eye = jnp.eye(L, dtype=bool)[:, :, None]
-    c = jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :])  # c_lm
+    c = _materialize(jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :]))
     u_pos = jnp.stack(u[:3], axis=1)  # (L, 3, B): u_l,q
     s_pos = s0[None] + u_pos[:, :, None, :] * c[:, None, :, :]  # (L, 3, L, B), m = l wrong
     s_pos = jnp.where(eye[:, None], 0.0, s_pos)
     s_pos = jnp.where(ok[:, None, None, :], s_pos, 0.0)
     var_pos = var0[None] + u_pos**2 * (w_int / r_safe)[:, None, :]
-    bias = _sum(jnp.abs(s_pos) * b_nom[None, None], 2)
-    spread = _sum(c**2 * var_acc[None], 1) + w_int**2 * var_acc  # (L, B)
+    # b_l,q = sum_m |S^(l)_qm| b_m as a loop over m of (L, 3, B) terms: one fused loop
+    bias = 0.0
+    for m in range(L):
+        term = jnp.abs(s0[None, :, m] + u_pos * c[:, m][:, None]) * b_nom[m]
+        bias = bias + jnp.where(eye[:, m][:, None], 0.0, term)
+    bias = jnp.where(ok[:, None], bias, 0.0)
+    spread = w_int**2 * var_acc  # (L, B)
+    for m in range(L):
+        spread = spread + c[:, m] ** 2 * var_acc[m]
     sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
+    # stored before they are concatenated with the other modes (a concatenation fused with
+    # the sums above ran one scalar loop per output element)
+    var_pos, bias, sigma_ss = (_materialize(x) for x in (var_pos, bias, sigma_ss))
     return s0, var0, s_pos, var_pos, bias, sigma_ss, ok
 
 
@@ -196,34 +276,39 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky."""
     C = p_const.shape[0]
     L = valid.shape[0]
+    # the inputs arrive transposed (batch-first to batch-last): store them once, or every
+    # fused consumer reads them with a stride
+    g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
+        _materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                  valid))
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
-    g = jnp.where(valid[:, None, :], g, 0.0)
-    w_int = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid)
-    var_acc = jnp.where(valid, var_acc, 0.0)
+    g = _materialize(jnp.where(valid[:, None, :], g, 0.0))
+    w_int = _materialize(linalg.inverse_variance_weights(
+        jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
+    var_acc = _materialize(jnp.where(valid, var_acc, 0.0))
     var_int = jnp.where(valid, var_int, 0.0)
-    b_nom = jnp.where(valid, b_nom, 0.0)
-    member = valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None])
+    b_nom = _materialize(jnp.where(valid, b_nom, 0.0))
+    member = _materialize(
+        valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None]))
     cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
     cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
 
     if single_downdates and all_in_view_weighting == "int":
-        n0 = _normal([c[0] for c in cols], w_int, axis=0)
-        present = jnp.any(member, axis=0)
-        for c in range(C):
-            n0[3 + c][3 + c] = n0[3 + c][3 + c] + jnp.where(present[c], 0.0, 1.0)
-        lower0, aiv_ok = linalg.cholesky(n0)
-        s0, var0, s1, v1, b1, ss1, ok1 = _single_modes(w_int, cols, b_nom, var_acc, lower0)
-        s0 = jnp.where(aiv_ok[None, None], s0, 0.0)
-        keep_rest = valid[None] & ~fm.excluded[L:]
-        sr, vr, br, ssr, okr = _generic_modes(keep_rest, w_int, cols, member, b_nom, var_acc,
-                                              s0)
-        b0 = jnp.sum(jnp.abs(s0) * b_nom[None], axis=1)
-        s_pos = jnp.concatenate([s0[None], s1, sr], axis=0)
-        var_pos = jnp.concatenate([var0[None], v1, vr], axis=0)
-        bias = jnp.concatenate([b0[None], b1, br], axis=0)
-        sigma_ss = jnp.concatenate([jnp.zeros_like(b0)[None], ss1, ssr], axis=0)
-        nonsingular = jnp.concatenate([aiv_ok[None], ok1 & aiv_ok[None], okr], axis=0)
+        # all-in-view (mode 0) and the multi-source modes by Cholesky, batched together (one
+        # set of (1 + M, B) loops instead of two), then the singles from mode 0's inverse
+        keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded[L:]], axis=0)
+        sg, vg, bg, ssg, okg, lower = _generic_modes(keep, w_int, cols, member, b_nom,
+                                                     var_acc, None, return_factor=True)
+        aiv_ok = okg[0]
+        lower0 = [[None if e is None else e[0] for e in row] for row in lower]
+        _, _, s1, v1, b1, ss1, ok1 = _single_modes(w_int, cols, b_nom, var_acc, lower0,
+                                                   vg[0])
+        s_pos = jnp.concatenate([sg[:1], s1, sg[1:]], axis=0)
+        var_pos = _blocks([vg[:1], v1, vg[1:]])
+        bias = _blocks([bg[:1], b1, bg[1:]])
+        sigma_ss = _blocks([jnp.zeros_like(ssg[:1]), ss1, ssg[1:]])
+        nonsingular = jnp.concatenate([okg[:1], ok1 & aiv_ok[None], okg[1:]], axis=0)
     else:
         keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
         s_pos, var_pos, bias, sigma_ss, nonsingular = _generic_modes(
@@ -269,7 +354,7 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     nf = jnp.maximum(n_modes, 1).astype(dtype)
     k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
     k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
-    k_fa = jnp.stack([k_h, k_h, k_v], axis=0)  # (3, B)
+    k_fa = _materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
     threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
     prior = jnp.where(monitored, prior_all, 0.0)
@@ -289,24 +374,32 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
                       sigma_acc_u)
 
 
-def _log_risk(x, coef, mean, sd):
-    """log of sum_j coef_j Q((x - mean_j) / sd_j); terms on axis 0, x of shape coef.shape[1:]."""
-    return jnp.log(jnp.sum(coef * q_function((x[None] - mean) / sd), axis=0))
+#: up to this many terms the risk sum is written out term by term (one fused loop over the
+#: batch, no (terms, ...) temporary and no reduction over a non-minor axis)
+UNROLL_TERMS = 64
 
 
-def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
-    """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs; terms on axis 0 (J, ...), rhs (...).
+def _risk(x, coef, mean, inv_sd):
+    """sum_j coef_j Q((x - mean_j) / sd_j); terms on axis 0, x of shape coef.shape[1:]."""
+    if coef.shape[0] <= UNROLL_TERMS:
+        out = coef[0] * q_tail((x - mean[0]) * inv_sd[0])
+        for j in range(1, coef.shape[0]):
+            out = out + coef[j] * q_tail((x - mean[j]) * inv_sd[j])
+        return out
+    return jnp.sum(coef * q_tail((x[None] - mean) * inv_sd), axis=0)
 
-    coef >= 0 (terms with coef 0 are ignored; their sd must still be > 0), rhs > 0, and at least
-    one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged): pl is never
-    below the root, and lies within ``PL_TOLERANCE_M`` of it where converged.
-    """
+
+def _bound_factors(coef, rhs):
+    """Per-term factors of the bracket of ``solve_pl``: (active, big, k_lo, k_hi) with the
+    bracket ends max_j mean_j + sd_j k_j over the active (lo) or big (hi) terms (-inf: none).
+
+    lo: one term alone reaches the budget. hi: terms that cannot reach the budget even
+    together (coef < rhs, total D < rhs) are bounded by D; the other n_big terms get
+    (rhs - D) / n_big each. Without that split, one mode with a tiny prior and a huge mean
+    (e.g. an SOP-only subset) pushed hi to hundreds of metres and regula falsi crawled.
+    These depend on coef and rhs only, not on mean and sd."""
     active = coef > 0
     safe = jnp.where(active, coef, 1.0)
-    # lo: one term alone reaches the budget. hi: terms that cannot reach the budget even
-    # together (coef < rhs, total D < rhs) are bounded by D; the other n_big terms get
-    # (rhs - D) / n_big each. Without that split, one mode with a tiny prior and a huge mean
-    # (e.g. an SOP-only subset) pushed hi to hundreds of metres and regula falsi crawled.
     small = active & (coef < rhs[None])
     d_small = jnp.sum(jnp.where(small, coef, 0.0), axis=0)
     split = d_small < rhs
@@ -315,20 +408,34 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
     budget_big = jnp.where(split, rhs - d_small, rhs)
     p_lo = rhs[None] / safe
     p_hi = budget_big[None] / (n_big[None] * safe)
-    lo = jnp.max(jnp.where(active & (p_lo < 1),
-                           mean + sd * q_inverse(jnp.where(p_lo < 1, p_lo, 0.5)), -jnp.inf),
-                 axis=0)
-    hi = jnp.max(jnp.where(big & (p_hi < 1),
-                           mean + sd * q_inverse(jnp.where(p_hi < 1, p_hi, 0.5)), -jnp.inf),
-                 axis=0)
+    active = active & (p_lo < 1)
+    big = big & (p_hi < 1)
+    k_lo = q_inverse(jnp.where(active, p_lo, 0.5))
+    k_hi = q_inverse(jnp.where(big, p_hi, 0.5))
+    return active, big, k_lo, k_hi
+
+
+def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
+    """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs; terms on axis 0 (J, ...), rhs (...).
+
+    coef >= 0 (terms with coef 0 are ignored; their sd must still be > 0), rhs > 0, and at least
+    one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged): pl is never
+    below the root, and lies within ``PL_TOLERANCE_M`` of it where converged. ``factors``:
+    ``_bound_factors(coef, rhs)`` when the caller has them (shared by equal right-hand sides).
+    """
+    coef = jnp.broadcast_to(coef, mean.shape)
+    active, big, k_lo, k_hi = _bound_factors(coef, rhs) if factors is None else factors
+    lo = jnp.max(jnp.where(active, mean + sd * k_lo, -jnp.inf), axis=0)
+    hi = jnp.max(jnp.where(big, mean + sd * k_hi, -jnp.inf), axis=0)
     hi = jnp.maximum(hi, lo)
     # Work in z(S) = sqrt(-2 log S), S the left-hand side: for one dominant term
     # c Q((x - m)/s), z is nearly (x - m)/s, almost linear in x, so regula falsi is nearly exact
     # between the kinks where the dominant term changes.
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
+    inv_sd = 1.0 / sd
 
     def h(x):
-        return z_rhs - jnp.sqrt(jnp.maximum(-2.0 * _log_risk(x, coef, mean, sd), 0.0))
+        return z_rhs - jnp.sqrt(jnp.maximum(-2.0 * jnp.log(_risk(x, coef, mean, inv_sd)), 0.0))
 
     fa = jnp.maximum(h(lo), 0.0)  # >= 0 and <= 0 by construction; clip rounding
     fb = jnp.minimum(h(hi), 0.0)
@@ -363,12 +470,15 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS):
 def _pls_from_projection(pr, budget, iterations):
     """PLs (3, B), status (B,), EMT (B,) from a batch-last Projection."""
     scale = 1.0 - pr.p_not_monitored / (budget.phmi_v + budget.phmi_h)
-    rhs = jnp.stack([0.5 * budget.phmi_h * scale, 0.5 * budget.phmi_h * scale,
-                     budget.phmi_v * scale], axis=0)  # (3, B)
-    rhs = jnp.where(rhs > 0, rhs, budget.phmi_v)  # status already marks P_nm > P_thresh
-    coef = pr.prior.at[0].set(2.0)  # (K, B)
-    coef = jnp.broadcast_to(coef[:, None, :], pr.sigma.shape)  # (K, 3, B)
-    pl, converged = solve_pl(coef, pr.threshold + pr.bias, pr.sigma, rhs, iterations)
+    rhs_hv = jnp.stack([0.5 * budget.phmi_h * scale, budget.phmi_v * scale], axis=0)  # (2, B)
+    rhs_hv = jnp.where(rhs_hv > 0, rhs_hv, budget.phmi_v)  # status marks P_nm > P_thresh
+    coef = pr.prior.at[0].set(2.0)[:, None]  # (K, 1, B)
+    # east and north share the right-hand side: bracket factors (Q^-1 per term) once for both
+    factors = tuple(jnp.stack([f[:, 0], f[:, 0], f[:, 1]], axis=1)
+                    for f in _bound_factors(jnp.broadcast_to(coef, coef.shape[:1] + rhs_hv.shape),
+                                            rhs_hv))
+    rhs = jnp.stack([rhs_hv[0], rhs_hv[0], rhs_hv[1]], axis=0)  # (3, B)
+    pl, converged = solve_pl(coef, pr.threshold + pr.bias, pr.sigma, rhs, iterations, factors)
     status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=0),
                        Status.NOT_CONVERGED, pr.status).astype(jnp.int8)
     ok = status == Status.OK

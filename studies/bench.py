@@ -170,7 +170,7 @@ def profile_mhss(batch=65_536, repeats=3):
     import araim
     from araim.batching import map_chunks
     from araim.fault_modes import fault_modes_batch_last
-    from araim.mhss import _batch_last_inputs, _pls_from_projection, _project
+    from araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -187,7 +187,7 @@ def profile_mhss(batch=65_536, repeats=3):
                 if upto == "projectors":
                     out = pr.threshold + pr.bias + pr.sigma
                 else:
-                    out = _pls_from_projection(pr, budget, 10)[0]
+                    out = _pls_from_projection(pr, budget, PL_ITERATIONS)[0]
             return jnp.moveaxis(out, -1, 0)
 
         f = jax.jit(lambda *xs: map_chunks(kernel, xs, (batch,)))
