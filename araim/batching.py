@@ -3,15 +3,21 @@
 The MHSS kernel holds a few (modes x sources) arrays per geometry; over a batch of 65,536 each
 is ~100 MB and the kernel becomes memory-bound (measured: 23k PL/s unchunked, 80k PL/s in
 chunks of 1024, 9 GPS + 4 SOPs, 2 cores). ``lax.map`` over fixed-size chunks keeps every
-intermediate near 1 MB. Results do not depend on the chunk size: every geometry is computed
-independently and the padding geometries are dropped.
+intermediate small: after the Newton root finder (2026-11-25, otherwise idle machine, best of 5
+per setting, two passes) chunks of 64 / 128 / 256 / 1024 / 4096 gave 118k / 146-188k /
+154-159k / 129-133k / 132k PL/s; 256 is the steadiest (its (modes x sources) arrays stay in
+L2). Batches larger than one chunk are computed in chunks of exactly this shape, so there a
+geometry's result does not depend on the caller's batch size (XLA rounds differently at
+different shapes); a batch of at most one chunk runs at its own shape. Every geometry is
+computed independently and the padding geometries are dropped, so changing ``CHUNK`` moves
+results only by rounding (last bits), never by more.
 """
 
 import jax
 import jax.numpy as jnp
 
-#: geometries per chunk (a multiple of mc's reduction block of 1024)
-CHUNK = 1024
+#: geometries per chunk
+CHUNK = 256
 
 
 def map_chunks(fn, arrays, batch_shape, chunk=CHUNK):

@@ -21,10 +21,10 @@ All projectors are weighted with C_int^-1, S^(0) included (the ADD and MAAST; DE
 sqrt(S^(0) C_int S^(0)T)_qq). A clock column whose constellation has no source left in a mode
 is dropped by putting 1 on its (otherwise all-zero) diagonal: the position block is unchanged.
 
-Each PL equation is solved in log space by the Illinois variant of regula falsi from a bracket
-[lo, hi] that is valid by construction (lo: the largest PL at which one term alone reaches the
-budget; hi: every term at most budget / number of terms), a fixed number of iterations, then a
-check that the root lies within ``PL_TOLERANCE_M`` below the returned (conservative, upper) end.
+Each PL equation is solved in log space by safeguarded Newton steps inside a bracket [lo, hi]
+that is valid by construction (lo: the largest PL at which one term alone reaches the budget;
+hi: every term at most budget / number of terms), then one evaluation proves that the returned
+(conservative, upper) PL lies within ``PL_TOLERANCE_M`` above the root.
 """
 
 from typing import NamedTuple
@@ -43,11 +43,19 @@ from araim.validate import check_int
 
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
-#: Illinois iterations. Measured on the 2000 random geometries of tests/test_mhss.py (Table I,
-#: up to 150 modes, P_s^S up to 0.1, sigma_URA^S up to 25 m): 10 leave 5 NOT_CONVERGED, 12 leave
-#: 3, 14 none; the 9 GPS + 4 SOP bench case needs 7. Non-convergence is reported, never hidden.
-PL_ITERATIONS = 14
+#: at most this many iterations (the loop stops earlier once every element of the batch has
+#: converged). Measured (PLs not converged, of 3 per geometry) on the 2000 random geometries of
+#: tests/test_mhss.py (Table I, up to 150 modes, P_s^S up to 0.1, sigma_URA^S up to 25 m,
+#: orders up to 3): 5 iterations leave 41, 8 leave 9, 12 leave 1, 16 none; order 1 needs 5;
+#: the 9 GPS + 4 SOP bench case 3. Non-convergence is reported, never hidden.
+PL_ITERATIONS = 20
+#: a Newton step shorter than this ends the iteration of its element (the PL tolerance is 1e-3 m)
+NEWTON_STEP_TOL_M = 1e-7
+#: the PL returned is the converged Newton iterate plus this (covers the iterate's error, which
+#: after a step below NEWTON_STEP_TOL_M is of the order of that step squared)
+PL_MARGIN_M = 1e-6
 _SQRT1_2 = 0.7071067811865476
+_INV_SQRT_2PI = 0.3989422804014327  # 1 / sqrt(2 pi)
 #: sigma_ss below this fraction of sigma^(0) is rounding noise: the mode's separation is zero
 ZERO_SEPARATION_RTOL = 1e-9
 
@@ -79,20 +87,28 @@ def _poly(c, x):
     return out
 
 
+def _q_and_density(t):
+    """(Q(t), phi(t)): Q as in q_tail, phi(t) = exp(-t^2/2) / sqrt(2 pi) the standard normal
+    density, sharing erfc's exponential (the derivative of a PL equation costs one multiply)."""
+    x = jnp.minimum(jnp.abs(t) * _SQRT1_2, 27.0)  # erfc(27) underflows to 0
+    small = x < 1.0
+    z = x * x
+    e = jnp.exp(-z)
+    u = _poly(_ERF_U, z)
+    num = jnp.where(small, u - x * _poly(_ERF_T, z), e * _poly(_ERFC_P, x))
+    neg = t < 0
+    # Q(t) = Q(|t|) or 1 - Q(|t|), written with the division used once: XLA keeps a division
+    # with two users out of the consumer's fusion (one small loop per term, measured 3x slower)
+    q = jnp.where(neg, 1.0, 0.0) + jnp.where(neg, -0.5, 0.5) * num / jnp.where(
+        small, u, _poly(_ERFC_Q, x))
+    return q, e * _INV_SQRT_2PI
+
+
 def q_tail(t):
     """Q(t) as q_function, for the root finder: two of erfc's three Cephes branches and one
     division instead of three (about half the cost of jax.scipy.special.erfc on CPU); agrees
     with q_function to 1e-15 relative wherever Q(t) > 1e-29."""
-    x = jnp.minimum(jnp.abs(t) * _SQRT1_2, 27.0)  # erfc(27) underflows to 0
-    small = x < 1.0
-    z = x * x
-    u = _poly(_ERF_U, z)
-    num = jnp.where(small, u - x * _poly(_ERF_T, z), jnp.exp(-z) * _poly(_ERFC_P, x))
-    neg = t < 0
-    # Q(t) = Q(|t|) or 1 - Q(|t|), written with the division used once: XLA keeps a division
-    # with two users out of the consumer's fusion (one small loop per term, measured 3x slower)
-    return jnp.where(neg, 1.0, 0.0) + jnp.where(neg, -0.5, 0.5) * num / jnp.where(
-        small, u, _poly(_ERFC_Q, x))
+    return _q_and_density(t)[0]
 
 
 def q_inverse(p):
@@ -380,13 +396,17 @@ UNROLL_TERMS = 64
 
 
 def _risk(x, coef, mean, inv_sd):
-    """sum_j coef_j Q((x - mean_j) / sd_j); terms on axis 0, x of shape coef.shape[1:]."""
+    """(R, D): R(x) = sum_j coef_j Q((x - mean_j) / sd_j) and D(x) = -dR/dx = sum_j coef_j
+    phi((x - mean_j) / sd_j) / sd_j >= 0; terms on axis 0, x of shape coef.shape[1:]."""
     if coef.shape[0] <= UNROLL_TERMS:
-        out = coef[0] * q_tail((x - mean[0]) * inv_sd[0])
-        for j in range(1, coef.shape[0]):
-            out = out + coef[j] * q_tail((x - mean[j]) * inv_sd[j])
-        return out
-    return jnp.sum(coef * q_tail((x[None] - mean) * inv_sd), axis=0)
+        r = d = 0.0
+        for j in range(coef.shape[0]):
+            q, phi = _q_and_density((x - mean[j]) * inv_sd[j])
+            r = r + coef[j] * q
+            d = d + (coef[j] * inv_sd[j]) * phi
+        return r, d
+    q, phi = _q_and_density((x[None] - mean) * inv_sd)
+    return jnp.sum(coef * q, axis=0), jnp.sum(coef * inv_sd * phi, axis=0)
 
 
 def _bound_factors(coef, rhs):
@@ -422,49 +442,85 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
     one term with coef > rhs (the fault-free term has coef 2). Returns (pl, converged): pl is never
     below the root, and lies within ``PL_TOLERANCE_M`` of it where converged. ``factors``:
     ``_bound_factors(coef, rhs)`` when the caller has them (shared by equal right-hand sides).
+
+    Safeguarded Newton on h(x) = z(rhs) - z(R(x)), z(S) = sqrt(-2 log S): for one dominant term
+    c Q((x - m)/s), z is nearly (x - m)/s, almost linear in x, and the derivative costs one
+    multiply per term (the density shares erfc's exponential). Start at the lower bracket end
+    and keep a bracket [a, b] with h(a) >= 0 >= h(b); a Newton step that leaves it, or that is
+    not shorter than half the previous step (Numerical Recipes' rtsafe rule: Newton creeps from
+    the flat side of a kink where the dominant term changes), is replaced by an Illinois regula
+    falsi step between the bracket ends (bisection until h(b) is known). An element whose
+    Newton step falls below ``NEWTON_STEP_TOL_M``, or whose bracket is narrower than
+    ``PL_TOLERANCE_M``, is frozen: its values no longer change, so an element gets exactly what
+    a fixed ``iterations``-step loop would give it, whatever the rest of the batch needs. The
+    loop stops when every element is frozen or after ``iterations`` (the bound that keeps it a
+    fixed-count, jit-able solver). Then one evaluation proves the tolerance for
+    pl = x + ``PL_MARGIN_M``: h(pl - tol) >= 0 if x is at or above the root, else h(pl) <= 0;
+    where it fails, pl is the bracket's upper end if the bracket is narrower than tol, and the
+    element is reported not converged otherwise.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
     active, big, k_lo, k_hi = _bound_factors(coef, rhs) if factors is None else factors
     lo = jnp.max(jnp.where(active, mean + sd * k_lo, -jnp.inf), axis=0)
     hi = jnp.max(jnp.where(big, mean + sd * k_hi, -jnp.inf), axis=0)
     hi = jnp.maximum(hi, lo)
-    # Work in z(S) = sqrt(-2 log S), S the left-hand side: for one dominant term
-    # c Q((x - m)/s), z is nearly (x - m)/s, almost linear in x, so regula falsi is nearly exact
-    # between the kinks where the dominant term changes.
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
     inv_sd = 1.0 / sd
 
-    def h(x):
-        return z_rhs - jnp.sqrt(jnp.maximum(-2.0 * jnp.log(_risk(x, coef, mean, inv_sd)), 0.0))
+    def h_and_slope(x):
+        """h(x) and -h'(x) = z'(R) >= 0 (inf where R >= 1, i.e. z = 0)."""
+        r, d = _risk(x, coef, mean, inv_sd)
+        z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
+        return z_rhs - z, d / (r * z)
 
-    fa = jnp.maximum(h(lo), 0.0)  # >= 0 and <= 0 by construction; clip rounding
-    fb = jnp.minimum(h(hi), 0.0)
+    def cond(carry):
+        i, done = carry[0], carry[7]
+        return (i < iterations) & ~jnp.all(done)
 
-    def step(_, carry):
-        a, b, fa, fb, side = carry
-        denom = fa - fb
-        x = jnp.where(denom > 0, b + fb * (b - a) / jnp.where(denom > 0, denom, 1.0),
-                      0.5 * (a + b))
-        x = jnp.clip(x, a, b)
-        fx = h(x)
-        right = fx <= 0  # x becomes the new upper end b
-        a2 = jnp.where(right, a, x)
-        b2 = jnp.where(right, x, b)
+    def body(carry):
+        i, a, b, ha, hb, x, hx, done, slope, last, was_right = carry
+        right = hx <= 0  # x is at or above the root
         # Illinois: halve the value kept at an end that survives twice in a row
-        fa2 = jnp.where(right, jnp.where(side == 1, fa * 0.5, fa), fx)
-        fb2 = jnp.where(right, fx, jnp.where(side == -1, fb * 0.5, fb))
-        side2 = jnp.where(right, 1, -1).astype(side.dtype)
-        return a2, b2, fa2, fb2, side2
+        a, ha = jnp.where(right, a, x), jnp.where(right, jnp.where(was_right, 0.5 * ha, ha), hx)
+        b, hb = jnp.where(right, x, b), jnp.where(right, hx, jnp.where(was_right, hb, 0.5 * hb))
+        step = hx / slope
+        newton = x + step
+        # finite, nonzero slope: z > 0 there (R < 1), so the step is a real Newton step
+        frozen = done | ((jnp.abs(step) <= NEWTON_STEP_TOL_M) & (slope < jnp.inf)) | (
+            b - a <= PL_TOLERANCE_M)
+        # where Newton leaves the bracket or does not halve the previous step (the flat side of
+        # a kink, from where Newton creeps; Numerical Recipes' rtsafe rule), take the secant
+        # of the bracket ends (regula falsi; h is nearly linear in z space)
+        good = (newton > a) & (newton < b) & (jnp.abs(step) <= 0.5 * last)
+        denom = ha - hb
+        falsi = jnp.where(denom > 0, b + hb * (b - a) / jnp.where(denom > 0, denom, 1.0),
+                          0.5 * (a + b))
+        xn = jnp.where(frozen, x, jnp.where(good, newton, jnp.clip(falsi, a, b)))
+        hn, sn = h_and_slope(xn)
+        return (i + 1, a, b, ha, hb, xn, jnp.where(frozen, hx, hn), frozen,
+                jnp.where(frozen, slope, sn), jnp.where(frozen, last, jnp.abs(xn - x)), right)
 
-    side = jnp.zeros(lo.shape, jnp.int32)
-    a, b, fa, fb, side = jax.lax.fori_loop(0, iterations, step, (lo, hi, fa, fb, side))
-    # The root r lies in [a, b]. Regula falsi variants often pin it from one side only, so
-    # accept either end: b if r >= b - tol, else a + tol if r <= a + tol (both conservative).
-    upper_ok = (b - a <= PL_TOLERANCE_M) | (h(b - PL_TOLERANCE_M) >= 0)
-    a_tol = jnp.minimum(a + PL_TOLERANCE_M, b)
-    lower_ok = h(a_tol) <= 0
-    pl = jnp.where(upper_ok, b, a_tol)
-    return pl, upper_ok | lower_ok
+    h0, s0 = h_and_slope(lo)
+    h0 = jnp.maximum(h0, 0.0)  # h(lo) >= 0 by construction; clip rounding
+    done0 = hi - lo <= PL_TOLERANCE_M
+    # h(hi) <= 0 by construction; its value is only needed by the secant fallback, which
+    # bisects until b has moved (NaN: no secant), so it is not evaluated
+    h_hi = jnp.full_like(hi, jnp.nan)
+    _, a, b, _, _, x, hx, _, _, _, _ = jax.lax.while_loop(cond, body, (
+        jnp.int32(0), lo, hi, h0, h_hi, lo, h0, done0, s0, jnp.full_like(lo, jnp.inf),
+        jnp.zeros(lo.shape, bool)))
+    right = hx <= 0
+    a = jnp.where(right, a, x)
+    b = jnp.where(right, x, b)
+    narrow = b - a <= PL_TOLERANCE_M
+    # pl = x + margin. h(x) <= 0 puts the root below x, so pl >= root, and h(pl - tol) >= 0
+    # proves pl - tol <= root; h(x) > 0 puts the root above x (> pl - tol), and h(pl) <= 0
+    # proves pl >= root. The same pl on either side: rounding at the root cannot move it by tol.
+    pl_newton = x + PL_MARGIN_M
+    h_probe = h_and_slope(jnp.where(right, pl_newton - PL_TOLERANCE_M, pl_newton))[0]
+    proved = jnp.where(right, h_probe >= 0, h_probe <= 0)
+    pl = jnp.where(proved, pl_newton, b)
+    return pl, narrow | proved
 
 
 def _pls_from_projection(pr, budget, iterations):
