@@ -473,12 +473,8 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
         z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
         return z_rhs - z, d / (r * z)
 
-    def cond(carry):
-        i, done = carry[0], carry[7]
-        return (i < iterations) & ~jnp.all(done)
-
-    def body(carry):
-        i, a, b, ha, hb, x, hx, done, slope, last, was_right = carry
+    def propose(a, b, ha, hb, x, hx, slope, last, was_right, done):
+        """Take the point x just evaluated into the bracket and propose the next one."""
         right = hx <= 0  # x is at or above the root
         # Illinois: halve the value kept at an end that survives twice in a row
         a, ha = jnp.where(right, a, x), jnp.where(right, jnp.where(was_right, 0.5 * ha, ha), hx)
@@ -496,9 +492,23 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
         falsi = jnp.where(denom > 0, b + hb * (b - a) / jnp.where(denom > 0, denom, 1.0),
                           0.5 * (a + b))
         xn = jnp.where(frozen, x, jnp.where(good, newton, jnp.clip(falsi, a, b)))
+        return a, b, ha, hb, right, frozen, xn
+
+    # carry: the bracket, the last evaluated point (x, h, slope), the length of the step that
+    # led to it, and the proposal made from it; the loop ends before evaluating proposals when
+    # every element is frozen, so no evaluation is spent on a converged batch
+    def cond(carry):
+        i, frozen = carry[0], carry[10]
+        return (i < iterations) & ~jnp.all(frozen)
+
+    def body(carry):
+        i, a, b, ha, hb, x, hx, slope, last, right, frozen, xn = carry
         hn, sn = h_and_slope(xn)
-        return (i + 1, a, b, ha, hb, xn, jnp.where(frozen, hx, hn), frozen,
-                jnp.where(frozen, slope, sn), jnp.where(frozen, last, jnp.abs(xn - x)), right)
+        hx, slope = jnp.where(frozen, hx, hn), jnp.where(frozen, slope, sn)
+        last = jnp.where(frozen, last, jnp.abs(xn - x))
+        a, b, ha, hb, right, frozen, xn2 = propose(a, b, ha, hb, xn, hx, slope, last, right,
+                                                   frozen)
+        return i + 1, a, b, ha, hb, xn, hx, slope, last, right, frozen, xn2
 
     h0, s0 = h_and_slope(lo)
     h0 = jnp.maximum(h0, 0.0)  # h(lo) >= 0 by construction; clip rounding
@@ -506,9 +516,11 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
     # h(hi) <= 0 by construction; its value is only needed by the secant fallback, which
     # bisects until b has moved (NaN: no secant), so it is not evaluated
     h_hi = jnp.full_like(hi, jnp.nan)
-    _, a, b, _, _, x, hx, _, _, _, _ = jax.lax.while_loop(cond, body, (
-        jnp.int32(0), lo, hi, h0, h_hi, lo, h0, done0, s0, jnp.full_like(lo, jnp.inf),
-        jnp.zeros(lo.shape, bool)))
+    last0 = jnp.full_like(lo, jnp.inf)
+    a, b, ha, hb, right, frozen, xn = propose(lo, hi, h0, h_hi, lo, h0, s0, last0,
+                                              jnp.zeros(lo.shape, bool), done0)
+    _, a, b, _, _, x, hx, _, _, _, _, _ = jax.lax.while_loop(cond, body, (
+        jnp.int32(0), a, b, ha, hb, lo, h0, s0, last0, right, frozen, xn))
     right = hx <= 0
     a = jnp.where(right, a, x)
     b = jnp.where(right, x, b)
