@@ -68,7 +68,8 @@ class NavigationFileError(ValueError):
     """A navigation file that cannot be read: names the file, the line and how to fix it."""
 
 
-def _open_text(path: Path):
+def open_rinex_text(path: Path):
+    """A RINEX file (plain or .gz) as ASCII text; undecodable bytes become U+FFFD."""
     if path.suffix == ".gz":
         return gzip.open(path, "rt", encoding="ascii", errors="replace")
     return open(path, encoding="ascii", errors="replace")
@@ -95,7 +96,7 @@ def check_navigation_file(path) -> dict:
     """
     path = Path(path)
     try:
-        with _open_text(path) as f:
+        with open_rinex_text(path) as f:
             lines = f.read().splitlines()
     except (OSError, EOFError, gzip.BadGzipFile) as e:
         raise NavigationFileError(f"{path}: cannot read the file ({e}); check the path and that "
@@ -163,22 +164,27 @@ def check_navigation_file(path) -> dict:
     return {"version": version, "records": records, "systems": sorted(systems)}
 
 
-@functools.lru_cache(maxsize=16)
-def _parsed_records(path_str: str, mtime_ns: int, size: int, systems: tuple):
-    """georinex parse -> flat NumPy record table, cached per (file, mtime, size, systems).
+_SYSTEM_NAMES = {"G": "GPS", "E": "Galileo"}
 
-    georinex needs ~2 s for a daily multi-GNSS RINEX 3 file on these machines (0.05 s for a
-    RINEX 2 GPS file); a study, a test module or the benchmark that loads the same file again
-    gets it from here.
+
+@functools.lru_cache(maxsize=4)
+def georinex_navigation(path_str: str, mtime_ns: int, size: int, systems: tuple):
+    """(``check_navigation_file`` info, georinex Dataset of the ``systems`` records present),
+    cached per (file, mtime, size, systems): the one place a navigation file is parsed, shared
+    by ``load_navigation`` and ``geometry.rinex_obs.navigation_extras``.
+
+    Raises ``NavigationFileError`` naming the file when it is malformed, holds none of
+    ``systems``, or georinex cannot parse it.
     """
     import georinex
 
     info = check_navigation_file(path_str)
     use = [s for s in systems if s in info["systems"]]
     if not use:
+        wanted = " or ".join(_SYSTEM_NAMES.get(s, s) for s in systems)
         raise NavigationFileError(
-            f"{path_str}: no {'/'.join(systems)} records (the file holds "
-            f"{', '.join(info['systems'])}); give a file with GPS or Galileo ephemerides")
+            f"{path_str}: no {wanted} records (the file holds "
+            f"{', '.join(info['systems'])}); give a file with {wanted} ephemerides")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # georinex/xarray FutureWarnings on merge defaults
         try:
@@ -187,6 +193,18 @@ def _parsed_records(path_str: str, mtime_ns: int, size: int, systems: tuple):
         except Exception as e:  # georinex raises assorted types; one message for the user
             raise NavigationFileError(f"{path_str}: georinex could not parse the file "
                                       f"({type(e).__name__}: {e})") from None
+    return info, ds
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed_records(path_str: str, mtime_ns: int, size: int, systems: tuple):
+    """georinex parse -> flat NumPy record table, cached per (file, mtime, size, systems).
+
+    georinex needs ~2 s for a daily multi-GNSS RINEX 3 file on these machines (0.05 s for a
+    RINEX 2 GPS file); a study, a test module or the benchmark that loads the same file again
+    gets it from here.
+    """
+    _, ds = georinex_navigation(path_str, mtime_ns, size, systems)
     return _record_table(ds, systems, path_str)
 
 

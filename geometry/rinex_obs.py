@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from geometry import atmosphere, gpstime
+from geometry.ephemeris import NavigationFileError, georinex_navigation, open_rinex_text
 from geometry.frames import (
     C_M_S,
     _az_el_from_rotation,
@@ -75,12 +76,6 @@ class Observations(NamedTuple):
     path: str
 
 
-def _open_text(path: Path):
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", encoding="ascii", errors="replace")
-    return open(path, encoding="ascii", errors="replace")
-
-
 def check_observation_file(path) -> dict:
     """Structural check of a RINEX 2/3 observation header before georinex parses the file.
 
@@ -90,7 +85,7 @@ def check_observation_file(path) -> dict:
     """
     path = Path(path)
     try:
-        with _open_text(path) as f:
+        with open_rinex_text(path) as f:
             header = []
             for line in f:
                 header.append(line.rstrip("\n"))
@@ -243,7 +238,7 @@ def read_observations(path, max_epochs=None) -> Observations:
 
 def _header_interval(path, info):
     try:
-        with _open_text(path) as f:
+        with open_rinex_text(path) as f:
             for _, line in zip(range(info["header_lines"]), f, strict=False):
                 if line[60:80].strip() == "INTERVAL":
                     return float(line[:10])
@@ -267,22 +262,7 @@ class NavigationExtras(NamedTuple):
 
 @functools.lru_cache(maxsize=8)
 def _nav_extras(path_str, mtime_ns, size):
-    import georinex
-
-    from geometry.ephemeris import NavigationFileError, check_navigation_file
-
-    info = check_navigation_file(path_str)
-    if "G" not in info["systems"]:
-        raise NavigationFileError(f"{path_str}: no GPS records (the file holds "
-                                  f"{', '.join(info['systems'])})")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            ds = (georinex.load(path_str, use=["G"]) if info["version"] >= 3
-                  else georinex.load(path_str))
-        except Exception as e:
-            raise NavigationFileError(f"{path_str}: georinex could not parse the file "
-                                      f"({type(e).__name__}: {e})") from None
+    _, ds = georinex_navigation(path_str, mtime_ns, size, ("G",))
     ion = ds.attrs.get("ionospheric_corr_GPS")
     alpha = beta = None
     if ion is not None:
@@ -306,8 +286,6 @@ def navigation_extras(path) -> NavigationExtras:
     (RINEX 2) or ``IONOSPHERIC CORR GPSA / GPSB`` (RINEX 3), or holds only zeros; the caller
     then decides (the replay applies no ionospheric correction and says so).
     """
-    from geometry.ephemeris import NavigationFileError
-
     p = Path(path).expanduser()
     if not p.is_file():
         raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "

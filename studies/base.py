@@ -2,6 +2,7 @@
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from araim.validate import check_int, check_positive, check_probability, check_range
@@ -35,6 +36,30 @@ def count(minimum, maximum=None):
 
 def in_range(lo, hi):
     return lambda name, v: check_range(name, v, lo, hi)
+
+
+#: the value of a ``recording`` parameter that means "synthesize, replay nothing"
+NO_RECORDING = "none"
+
+
+def parse_recording(name, v):
+    """A ``recording`` parameter: 'none' (or empty) to synthesize, else a recorded drive or
+    flight in the ``geometry.recording`` format: its folder, or the folder's meta.json. Returns
+    'none' or the resolved path; the tables themselves are checked when loaded."""
+    s = str(v).strip()
+    if s in ("", NO_RECORDING):
+        return NO_RECORDING
+    p = Path(s).expanduser()
+    if p.is_file() and p.name == "meta.json":
+        return str(p.resolve())
+    if not p.is_dir():
+        raise ValueError(f"{name}: {s!r} is not a folder (or its meta.json); give the folder of "
+                         "a recording, or 'none' to synthesize (README 'Recorded drives and "
+                         "flights')")
+    if not (p / "meta.json").is_file():
+        raise ValueError(f"{name}: {s!r} has no meta.json; a recording is a folder with "
+                         "meta.json and its tables (README 'Recorded drives and flights')")
+    return str(p.resolve())
 
 
 def check_bpp_annulus(p):

@@ -41,12 +41,14 @@ import geometry
 import mc
 from araim import ekf_raim, ekf_replay
 from studies.base import (
+    NO_RECORDING,
     Param,
     Study,
     StudyResult,
     count,
     in_range,
     non_negative,
+    parse_recording,
     positive,
     probability,
 )
@@ -68,21 +70,6 @@ def parse_dof(name, v):
         return "n_s-4"
     raise ValueError(f"{name} must be 'n_s' (d = N_s, seed 002) or 'n_s-4' (d = N_s - 4, seed "
                      f"000's text), got {v!r}")
-
-
-def parse_recording(name, v):
-    """'' (none: synthesize) or a folder holding meta.json (checked fully when loaded)."""
-    s = str(v).strip()
-    if not s:
-        return ""
-    p = Path(s).expanduser()
-    if not p.is_dir():
-        raise ValueError(f"{name}: {s!r} is not a folder; give the folder of a recorded drive "
-                         "(meta.json + tables, README 'Recorded drives and flights')")
-    if not (p / "meta.json").is_file():
-        raise ValueError(f"{name}: {s!r} has no meta.json; a recorded drive is a folder with "
-                         "meta.json and its tables (README 'Recorded drives and flights')")
-    return str(p)
 
 
 def parse_path(name, v):
@@ -134,8 +121,9 @@ class EkfDriveStudy(Study):
             "hal_m": Param(30.0, positive, "horizontal alert limit (seed silent; seed 001)", "m"),
             "dof": Param(self.default_dof, parse_dof,
                          "NIS degrees of freedom: n_s (seed 002) or n_s-4 (seed 000)"),
-            "recording": Param("", parse_recording, "replay this recorded drive folder for the "
-                               "single-drive figures (Monte Carlo skipped)"),
+            "recording": Param(NO_RECORDING, parse_recording,
+                               "replay this recorded drive folder for the single-drive figures "
+                               "(Monte Carlo skipped); 'none': synthesize"),
             "drive_dir": Param("", parse_path, "keep the synthesized drive recording in this "
                                "folder (default: temporary)"),
             "chunk": Param(64, count(1), "runs per progress step (never changes a result)"),
@@ -183,7 +171,7 @@ class EkfDriveStudy(Study):
         sc = self.scenario()
         onset, tower = p["fault_onset_s"], p["fault_tower"] - 1
         prov = {}
-        if p["recording"]:
+        if p["recording"] != NO_RECORDING:
             rec = geometry.load_recording(p["recording"])
             tr = ekf_replay.replay_ekf_raim(rec, sigma_pr_m=p["sigma_pr_m"], cfg=cfg)
             single_src = f"recording {p['recording']} ({rec.meta.get('name', '')})"
@@ -210,7 +198,7 @@ class EkfDriveStudy(Study):
 
         ds = self._trace_dataset(tr, p)
         mcres = {}
-        if not p["recording"]:
+        if p["recording"] == NO_RECORDING:
             setup = ekf_raim.drive_setup(sc, cfg=cfg, duration_s=self._duration(p))
             variants = [("nominal", p["mp_sigma_m"], p["mp_tau_s"])]
             if p["sens_mp_sigma_m"] > 0:
@@ -286,7 +274,8 @@ class EkfDriveStudy(Study):
                 "median": {"rmse_without": np.median(rm[:, 0]), "rmse_with": np.median(rm[:, 1]),
                            "reduction": np.median(red), "max_without": np.median(mx[:, 0]),
                            "max_with": np.median(mx[:, 1]), "max_reduction": np.median(mred)}}
-        src = "replayed recording" if p["recording"] else "single drive (run 0, via recording)"
+        src = ("replayed recording" if p["recording"] != NO_RECORDING
+               else "single drive (run 0, via recording)")
         why = self.difference_note(p)
         for key, quantity, unit, published in self.published_rows:
             rows.append({"quantity": f"{quantity}, {src}", "unit": unit, "published": published,
@@ -312,7 +301,7 @@ class EkfDriveStudy(Study):
             rows.append({"quantity": "drive length", "unit": "km",
                          "published": self.published_length_km,
                          "reproduced": float(self.scenario().traj.length_m) / 1e3
-                         if not p["recording"] else nan,
+                         if p["recording"] == NO_RECORDING else nan,
                          "note": "route sized to the published length"})
         metrics = {"single_drive": single, "epochs": int(len(tr.t_s)),
                    "init_source": tr.init_source, "dof": p["dof"],

@@ -33,9 +33,17 @@ from araim import snapshot
 from araim.error_models import gnss_variances
 from geometry import gnss_scenario, gpstime
 from geometry.recording import load_recording
-from studies.base import Param, Study, StudyResult, count, in_range, positive, probability
+from studies.base import (
+    Param,
+    Study,
+    StudyResult,
+    count,
+    in_range,
+    parse_recording,
+    positive,
+    probability,
+)
 from studies.seed004_common import parse_nav, resolve_sky
-from studies.seed004_uav import parse_recording
 
 PUBLISHED_HPL_GPS_M = 15.01
 PUBLISHED_HPL_SOP_M = 8.29

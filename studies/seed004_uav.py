@@ -36,7 +36,6 @@ Setup:
     test coefficient tau > 1, any mode).
 """
 
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -59,6 +58,7 @@ from studies.base import (
     count,
     in_range,
     non_negative,
+    parse_recording,
     positive,
     probability,
 )
@@ -73,16 +73,6 @@ STANFORD_SOPS = (0, 1, 2, 4, 8)
 #: epochs per MHSS kernel call (fixed: results do not depend on N or the chunk)
 BLOCK = 480
 BLOCK_FDE = 96
-
-
-def parse_recording(name, v):
-    v = str(v).strip()
-    if v == "none":
-        return v
-    p = Path(v).expanduser()
-    if not p.exists():
-        raise ValueError(f"{name} must be 'none' or a recording folder, got {v!r} (not found)")
-    return str(p.resolve())
 
 
 def parse_prn(name, v):
