@@ -521,9 +521,7 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
                                               jnp.zeros(lo.shape, bool), done0)
     _, a, b, _, _, x, hx, _, _, _, _, _ = jax.lax.while_loop(cond, body, (
         jnp.int32(0), a, b, ha, hb, lo, h0, s0, last0, right, frozen, xn))
-    right = hx <= 0
-    a = jnp.where(right, a, x)
-    b = jnp.where(right, x, b)
+    right = hx <= 0  # (a, b) already hold the last evaluated point x (``propose``)
     narrow = b - a <= PL_TOLERANCE_M
     # pl = x + margin. h(x) <= 0 puts the root below x, so pl >= root, and h(pl - tol) >= 0
     # proves pl - tol <= root; h(x) > 0 puts the root above x (> pl - tol), and h(pl) <= 0
