@@ -120,7 +120,7 @@ def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_so
 def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/."""
     import araim
-    from araim.mhss import _protection_levels_jit
+    from araim.batching import default_threads
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -128,14 +128,21 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     args = (x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
             x["p_sat"], x["p_const"], x["valid"])
 
+    def call(threads=None):
+        # the public entry point, host-side input checks and thread split included
+        return araim.protection_levels(*args[:7], budget, args[7], max_order=order,
+                                       threads=threads)
+
     def run():
-        return _protection_levels_jit(*args, budget=budget, max_order=order).hpl_m \
-            .block_until_ready()
+        return call().hpl_m.block_until_ready()
 
     run()
     t = _best_time(run, repeats)
-    res = _protection_levels_jit(*args, budget=budget, max_order=order)
+    call(1).hpl_m.block_until_ready()
+    t1 = _best_time(lambda: call(1).hpl_m.block_until_ready(), repeats)
+    res = call()
     out = {"batch": batch, "jax_s": t, "jax_pl_per_s": batch / t,
+           "threads": default_threads(), "one_thread_pl_per_s": batch / t1,
            "status_ok_share": float(np.mean(np.asarray(res.status) == 0)),
            "n_modes": int(np.max(np.asarray(res.n_modes)))}
     ref = _load_tests_module("reference_mhss")

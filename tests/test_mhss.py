@@ -621,3 +621,49 @@ def test_bad_input_is_rejected_with_the_field_name():
     with pytest.raises(ValueError, match="p_sat"):
         araim.protection_levels(*args[:5], args[5] + 1.5, args[6], budget(), valid=args[-1],
                                 max_order=1)
+
+
+def test_root_finder_q_and_density_match_scipy():
+    """The root finder's (Q, phi) pair against SciPy: Q to 1e-14 relative wherever
+    Q > 1e-29 (its docstring claims 1e-15 against erfc; SciPy's ndtr adds its own rounding),
+    phi = exp(-t^2/2)/sqrt(2 pi) to 1e-15 plus the conditioning of exp at z = t^2/2 (an
+    argument rounded by eps moves exp(-z) by z eps relative; both sides round z, twice:
+    4 z eps), over t from -10 to 11 plus the branch point x = 1 (t = sqrt 2) from both sides."""
+    from araim.mhss import _q_and_density
+
+    t = np.concatenate([np.linspace(-10.0, 11.0, 20_001),
+                        np.sqrt(2.0) + np.array([-1e-12, 0.0, 1e-12])])
+    q, phi = (np.asarray(a) for a in jax.jit(_q_and_density)(t))
+    q_ref = special.ndtr(-t)
+    phi_ref = np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
+    keep = q_ref > 1e-29
+    assert keep.sum() > 19_000
+    assert np.max(np.abs(q[keep] / q_ref[keep] - 1.0)) < 1e-14
+    z = 0.5 * t * t
+    assert np.all(np.abs(phi / phi_ref - 1.0) < 1e-15 + 4.0 * z * np.finfo(float).eps)
+
+
+def test_threaded_split_is_bit_identical_to_one_call():
+    """araim.batching.map_threads: parts of whole chunks on host threads give exactly the bits
+    of one call, for batches that split evenly, unevenly, into 3 parts, or not at all (fewer
+    than 2 chunks per thread)."""
+    from araim.batching import CHUNK
+    from araim.mhss import prepare_inputs, protection_levels_threaded
+    from studies.bench import mhss_bench_inputs
+
+    x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)
+    args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
+                          x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
+    budget = araim.BUDGET_SEED004_TABLE_I
+    one = protection_levels_threaded(args, budget, 1, threads=1)
+    for n, threads in ((6 * CHUNK + 37, 2), (6 * CHUNK + 37, 3), (4 * CHUNK, 2),
+                       (3 * CHUNK, 2)):
+        part = tuple(a[:n] for a in args)
+        ref = one if n == 6 * CHUNK + 37 else protection_levels_threaded(part, budget, 1,
+                                                                         threads=1)
+        got = protection_levels_threaded(part, budget, 1, threads=threads)
+        for name, a, b in zip(got._fields, got, ref, strict=True):
+            assert a.shape == b.shape and np.array_equal(np.asarray(a), np.asarray(b)), name
+    assert np.all(np.isfinite(np.asarray(one.hpl_m)))
+    with pytest.raises(ValueError, match="threads"):
+        araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
