@@ -495,6 +495,7 @@ class SweepResult:
     workers: int | None = None
     scheduler: str | None = None
     realizations_computed: int = 0
+    threads: int = 1
 
 
 @dataclass(frozen=True)
@@ -635,7 +636,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
               batch_size: int = BLOCK, resume: bool = False, workers: int | None = None,
               scheduler: str | None = None,
               progress: bool = True, description: str = "",
-              scheduler_timeout_s: float = 10.0) -> SweepResult:
+              scheduler_timeout_s: float = 10.0, threads: int | None = None) -> SweepResult:
     """Run every cell of the grid ``axes`` for ``realizations`` draws and reduce.
 
     Args:
@@ -663,12 +664,23 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
       progress: show one bar (cells, realizations/s, ETA) and a final line on stderr.
       description: label of the bar.
       scheduler_timeout_s: how long to try to reach ``scheduler``.
+      threads: in-process only: chunks computed side by side on this many host threads
+        (default ``araim.batching.default_threads()``: ``OARAIM_THREADS`` or 2). XLA runs one
+        chunk's programs on ~1.6 of the 2 cores; two chunks at a time use both. Results do not
+        depend on it (each chunk is computed exactly as alone; reductions are order-free).
     """
     t0 = time.perf_counter()
     axes = tuple(axes)
     reducers = tuple(reducers)
     key_axes = tuple(key_axes)
     _check_args(axes, realizations, reducers, key_axes, workers, scheduler)
+    if threads is None:
+        from araim.batching import default_threads
+
+        threads = default_threads()
+    if not isinstance(threads, int | np.integer) or threads < 1:
+        raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
+    threads = 1 if (workers is not None or scheduler is not None) else int(threads)
     realizations = int(realizations)
     batch_size = _round_up(int(batch_size), BLOCK)
     chunk_size = min(_round_up(int(chunk_size), batch_size),
@@ -761,25 +773,37 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
             _run_dask(tasks, kernel_factory, factory_id, args_of, finished, workers, scheduler,
                       scheduler_timeout_s)
         else:
-            kernels = {}
-            for task in tasks:
+            kernels = collections.OrderedDict()
+
+            def kernel_of(task):
+                """Built once per cell: tasks come cell by cell, so the last few suffice."""
                 c = cells[task[0]]
                 if c.text not in kernels:
-                    kernels = {c.text: kernel_factory(dict(c.coords))}  # cells come in order
-                finished(task, compute_chunk(kernels[c.text], *args_of(task)))
+                    kernels[c.text] = kernel_factory(dict(c.coords))
+                    while len(kernels) > 4:
+                        kernels.popitem(last=False)
+                return kernels[c.text]
+
+            if threads > 1 and len(tasks) > 1:
+                _run_threads(tasks, kernel_of, args_of, finished, threads)
+            else:
+                for task in tasks:
+                    finished(task, compute_chunk(kernel_of(task), *args_of(task)))
         if not covered.all():  # cannot happen: every missing block had a task
             raise RuntimeError("internal error: some blocks of the sweep were never computed")
 
         ds = _dataset(axes, shape, cells, reducers, states, realizations, seed, key_axes)
         wall_s = time.perf_counter() - t0
         where = f"{workers} local Dask workers" if workers else (
-            f"Dask scheduler {scheduler}" if scheduler else "in-process")
+            f"Dask scheduler {scheduler}" if scheduler else
+            f"in-process, {threads} thread{'s' if threads > 1 else ''}")
         bar.final_line(f"{description or 'sweep'}: {len(cells)} cells x {realizations:,} "
                        f"realizations, {len(tasks)} chunks computed ({where}), {reused} reused, "
                        f"{wall_s:.1f} s; chunk files in {chunk_dir}")
     return SweepResult(ds, len(tasks), reused, wall_s, out_dir, len(cells), chunk_size,
                        batch_size=batch_size,
-                       workers=workers, scheduler=scheduler, realizations_computed=todo_real)
+                       workers=workers, scheduler=scheduler, realizations_computed=todo_real,
+                       threads=threads)
 
 
 def _dataset(axes, shape, cells, reducers, states, realizations, seed, key_axes):
@@ -822,6 +846,36 @@ def check_scheduler(address: str, timeout_s: float = 10.0):
                 pass
     except Exception as e:  # noqa: BLE001 - malformed or unreachable: the user's address
         raise _scheduler_error(address, e) from None
+
+
+def _run_threads(tasks, kernel_of, args_of, finished, threads):
+    """Compute the tasks on ``threads`` host threads (JAX releases the GIL while XLA runs),
+    at most 2 x threads in flight; each result is written here, in this thread, as it
+    completes. An exception (or Ctrl-C) cancels what has not started and is re-raised once the
+    running chunks end; every chunk finished before is already on disk."""
+    import concurrent.futures as cf
+
+    pending = iter(tasks)
+    inflight = {}
+    with cf.ThreadPoolExecutor(threads, thread_name_prefix="oaraim-sweep") as pool:
+        def submit_next():
+            task = next(pending, None)
+            if task is not None:
+                inflight[pool.submit(compute_chunk, kernel_of(task), *args_of(task))] = task
+
+        try:
+            for _ in range(2 * threads):
+                submit_next()
+            while inflight:
+                done, _ = cf.wait(inflight, return_when=cf.FIRST_COMPLETED)
+                for fut in sorted(done, key=inflight.get):
+                    task = inflight.pop(fut)
+                    finished(task, fut.result())  # re-raises the chunk's exception
+                    submit_next()
+        except BaseException:
+            for fut in inflight:
+                fut.cancel()
+            raise
 
 
 def _run_dask(tasks, kernel_factory, factory_id, args_of, finished, workers, scheduler,

@@ -121,7 +121,7 @@ def _sweep_provenance(sweep, resume):
     return {"cells": sweep.cells, "chunk_size": sweep.chunk_size, "batch_size": sweep.batch_size,
             "chunks_computed": sweep.chunks_computed, "chunks_reused": sweep.chunks_reused,
             "realizations_computed": sweep.realizations_computed, "resumed": bool(resume),
-            "workers": sweep.workers, "scheduler": sweep.scheduler,
+            "workers": sweep.workers, "scheduler": sweep.scheduler, "threads": sweep.threads,
             "sweep_wall_time_s": sweep.wall_s,
             "dask": version("dask"), "distributed": version("distributed"),
             "chunk_files": str(Path(sweep.out_dir) / "chunks")}

@@ -164,6 +164,40 @@ def test_bit_identical_for_any_chunk_size(tmp_path, reference, chunk):
     assert res.chunk_size == min(chunk, 5 * BLOCK)
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+def test_bit_identical_for_any_number_of_threads(tmp_path, reference, threads):
+    """The reference runs on the default 2 host threads; one thread and three give the same
+    bits (chunks finish in another order, reductions are order-free)."""
+    res = _run(tmp_path, threads=threads)
+    xr.testing.assert_identical(res.dataset, reference.dataset)
+    assert res.threads == threads and reference.threads == 2
+
+
+_BROKEN = {"k": 2}
+
+
+def _failing_factory(coords):
+    def kernel(keys):
+        if int(coords["k"]) == _BROKEN["k"]:
+            raise RuntimeError(f"cell k={_BROKEN['k']} broke")
+        return {"v": jnp.full(keys.shape[0], float(coords["k"]))}
+    return kernel
+
+
+def test_an_error_in_a_thread_is_raised_and_a_resume_completes(tmp_path):
+    kw = dict(seed=0, out_dir=tmp_path, fingerprint={}, progress=False, threads=2)
+    axes = (Axis("k", (0, 1, 2, 3, 4, 5)),)
+    _BROKEN["k"] = 2
+    try:
+        with pytest.raises(RuntimeError, match="cell k=2 broke"):
+            run_sweep(_failing_factory, axes, 1024, (Mean("v"),), **kw)
+    finally:
+        _BROKEN["k"] = None
+    res = run_sweep(_failing_factory, axes, 1024, (Mean("v"),), resume=True, **kw)
+    assert res.chunks_reused + res.chunks_computed == 6 and res.chunks_computed >= 1
+    assert res.dataset["v_mean"].values.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+
+
 def test_bit_identical_for_any_chunk_size_at_a_bigger_batch(tmp_path):
     ref = _run(tmp_path, "ref", chunk=2048, batch_size=2048)
     for chunk in (4096, 6144):
@@ -298,6 +332,7 @@ def test_fresh_run_ignores_results_of_an_earlier_run(tmp_path, reference):
     (dict(key_axes=("c",)), "key axis 'c'"),
     (dict(n=0), "realizations"),
     (dict(workers=0), "workers"),
+    (dict(threads=0), "threads"),
     (dict(workers=2, scheduler="tcp://127.0.0.1:1"), "not both"),
     (dict(reducers=(Mean("r"), Mean("r"))), "both produce"),
     (dict(reducers=()), "at least one reducer"),
