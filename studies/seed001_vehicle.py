@@ -34,6 +34,7 @@ from araim.error_models import gnss_variances
 from geometry import gnss_scenario, gpstime
 from geometry.recording import load_recording
 from studies.base import (
+    NO_RECORDING,
     Param,
     Study,
     StudyResult,
@@ -85,7 +86,7 @@ class Seed001Vehicle(Study):
         "p_fa": Param(snapshot.DEFAULT_P_FA, probability, "false-alarm probability (seed silent)"),
         "p_md": Param(snapshot.DEFAULT_P_MD, probability,
                       "missed-detection probability (seed silent)"),
-        "recording": Param("none", parse_recording, "replay a recorded drive (folder in the "
+        "recording": Param(NO_RECORDING, parse_recording, "replay a recorded drive (folder in the "
                            "geometry.recording format; then one realization = the drive)"),
         "chunk": Param(BLOCK_ROWS, count(1), "accepted for the common interface and ignored "
                        f"(fixed blocks of {BLOCK_ROWS} epoch rows)"),
@@ -94,7 +95,7 @@ class Seed001Vehicle(Study):
     def inputs(self, params):
         """(EpochGeometry, noise-free pseudoranges or the recorded ones, corrections, desc,
         recorded?)."""
-        if params["recording"] != "none":
+        if params["recording"] != NO_RECORDING:
             m = gnss_scenario.from_recording(load_recording(params["recording"]),
                                              params["mask_deg"])
             return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}", \

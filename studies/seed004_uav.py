@@ -33,7 +33,12 @@ Setup:
     satellite (PRN 8 as in the seed if it is in view the whole flight, else the lowest PRN that
     is); the solution-separation statistic |dx_q| and threshold T_q of that satellite's fault
     mode, GPS only vs GPS + SOP 1, and the detection times (first epoch after the onset with a
-    test coefficient tau > 1, any mode).
+    test coefficient tau > 1, any mode). The noise makes those times coincide at the epoch
+    spacing (76 ms), so the sensitivity loss is also given without noise: the minimum
+    detectable bias on that satellite per epoch (min over monitored modes and axes of
+    T_i,q / |separation per metre of bias|, from a unit residual on the satellite alone; the
+    separations are linear in the residual) and the time at which the ramp reaches it,
+    interpolated between epochs. Theorem 1 makes it larger with one SOP by the K_fa ratio.
 """
 
 
@@ -52,6 +57,7 @@ from araim.mhss import required_order
 from geometry import gnss_scenario, gpstime
 from geometry.recording import load_recording
 from studies.base import (
+    NO_RECORDING,
     Param,
     Study,
     StudyResult,
@@ -109,7 +115,7 @@ def sop_order(n_towers):
 
 def synthesize(params, seed, scenario=None):
     """(EpochGeometry, pseudorange_m, correction_m, description) for the study's inputs."""
-    if params["recording"] != "none":
+    if params["recording"] != NO_RECORDING:
         m = gnss_scenario.from_recording(load_recording(params["recording"]), params["mask_deg"])
         return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}"
     scenario = scenario or geometry.uav_seed004()
@@ -157,6 +163,18 @@ def labels(geom):
     return lab, ["GPS"] + names
 
 
+def _crossing_time(t_s, f, after):
+    """First time at which f (sampled at t_s) reaches 0 from below where ``after``, linearly
+    interpolated between the two epochs around the crossing (inf if it never does)."""
+    hit = np.flatnonzero((f >= 0) & after)
+    if hit.size == 0:
+        return float("inf")
+    i = int(hit[0])
+    if i == 0 or not np.isfinite(f[i - 1]):
+        return float(t_s[i])
+    return float(t_s[i - 1] + (t_s[i] - t_s[i - 1]) * (-f[i - 1]) / (f[i] - f[i - 1]))
+
+
 def _blocks(n_t, size):
     for start in range(0, n_t, size):
         yield start, np.minimum(np.arange(start, start + size), n_t - 1), min(size, n_t - start)
@@ -197,7 +215,7 @@ class Seed004Uav(Study):
                            "(~2 min per 2880 epochs on 2 CPU cores)"),
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagrams "
                        "(LPV-200)", "m"),
-        "recording": Param("none", parse_recording, "replay a recorded flight (folder in the "
+        "recording": Param(NO_RECORDING, parse_recording, "replay a recorded flight (folder in the "
                            "geometry.recording format) instead of synthesizing"),
         "chunk": Param(BLOCK, count(1), "accepted for the common interface and ignored "
                        f"(fixed blocks of {BLOCK} epochs)"),
@@ -338,15 +356,27 @@ class Seed004Uav(Study):
             tau_mode = np.zeros(n_t)
             tau_max = np.zeros(n_t)
             det = np.zeros(n_t, bool)
+            mdb = np.full(n_t, np.inf)
             g = np.asarray(r.g_enu)
             y = np.asarray(r.wnls.residual_m)
+            unit = np.zeros_like(y)
+            unit[:, j] = 1.0  # a 1 m bias on the faulty satellite alone, no noise
             for start, idx, n in _blocks(n_t, BLOCK):
-                s = solution_separation(
+                # s: the measured residuals; s1: a 1 m bias on satellite j alone. The
+                # separations are linear in the residual, so the noise-free bias at which the
+                # first tau reaches 1 (the minimum detectable bias) is the min over monitored
+                # modes and axes of T / |separation per metre of bias|
+                s, s1 = [solution_separation(
                     g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx],
                     var_acc[idx], np.broadcast_to(b_nom, (idx.size, b_nom.size)),
                     np.broadcast_to(p_sat, (idx.size, p_sat.size)),
                     np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
-                    y[idx], valid=used[idx], max_order=mo)
+                    resid[idx], valid=used[idx], max_order=mo) for resid in (y, unit)]
+                per_m = np.abs(np.asarray(s1.separation_m)[:n])
+                thr_all = np.asarray(s1.threshold_m)[:n]
+                live = (per_m > 0) & (thr_all > 0) & np.asarray(s1.monitored)[:n][..., None]
+                mdb[start:start + n] = np.min(np.where(live, thr_all / np.where(live, per_m, 1.0),
+                                                       np.inf), axis=(-2, -1))
                 ex = np.asarray(s.excluded)[:n]  # (n, K, L)
                 target = np.zeros(ex.shape[-1], bool)
                 target[j] = True
@@ -362,8 +392,10 @@ class Seed004Uav(Study):
             after = geom.t_s >= params["fault_onset_s"]
             first = np.flatnonzero(det & after)
             first_mode = np.flatnonzero((tau_mode > 1) & after)
+            t_nf = _crossing_time(geom.t_s, bias - mdb, after)
             out[tag] = {"sep": sep, "thr": thr, "tau_mode": tau_mode, "tau_max": tau_max,
-                        "detected": det, "max_order": mo,
+                        "detected": det, "max_order": mo, "mdb": mdb,
+                        "t_detect_noise_free": t_nf,
                         "t_detect": float(geom.t_s[first[0]]) if first.size else float("inf"),
                         "t_detect_mode": (float(geom.t_s[first_mode[0]]) if first_mode.size
                                           else float("inf")),
@@ -390,6 +422,8 @@ class Seed004Uav(Study):
         f_gps, f_sop = fault["gps"], fault["sop1"]
         sep_diff = float(np.max(np.abs(f_gps["sep"] - f_sop["sep"])))
         thr_ratio = float(np.median(f_sop["thr"][:, :2] / f_gps["thr"][:, :2]))
+        mdb_gps = float(np.median(f_gps["mdb"]))
+        mdb_sop = float(np.median(f_sop["mdb"]))
         # axis 0 east, 1 north, 2 up (integers: a string coordinate has no Zarr v3 encoding)
         coords = {"epoch": np.arange(n_t), "n_sops": np.asarray(configs), "axis": np.arange(3)}
         data = {"t_s": ("epoch", geom.t_s), "hpl_m": (("n_sops", "epoch"), hpl),
@@ -403,6 +437,7 @@ class Seed004Uav(Study):
             data[f"fault_tau_{tag}"] = ("epoch", f["tau_mode"])
             data[f"fault_tau_max_{tag}"] = ("epoch", f["tau_max"])
             data[f"fault_detected_{tag}"] = ("epoch", f["detected"])
+            data[f"fault_mdb_{tag}_m"] = ("epoch", f["mdb"])
         if excl is not None:
             data.update({"hpl_excl_m": ("epoch", excl["hpl"]), "hpe_excl_m": ("epoch", excl["hpe"]),
                          "hpl_excl_aiv_m": ("epoch", excl["hpl_aiv"]),
@@ -414,6 +449,8 @@ class Seed004Uav(Study):
             "fault_prn": fault["prn"], "fault_onset_s": params["fault_onset_s"],
             "fault_ramp_mps": params["fault_ramp_mps"], "sop_order": ",".join(sop_ids),
             "t_detect_gps_s": f_gps["t_detect"], "t_detect_sop1_s": f_sop["t_detect"],
+            "t_detect_noise_free_gps_s": f_gps["t_detect_noise_free"],
+            "t_detect_noise_free_sop1_s": f_sop["t_detect_noise_free"],
             "exclusion": int(excl is not None)})
         hpl_fig6 = excl["hpl"] if excl is not None else hpl[-1]
         hpe_fig6 = excl["hpe"] if excl is not None else hpe[-1]
@@ -452,6 +489,22 @@ class Seed004Uav(Study):
             {"quantity": f"detection time of the PRN {fault['prn']} ramp, GPS + SOP 1",
              "unit": "s", "published": None, "reproduced": f_sop["t_detect"],
              "note": "Theorem 1: later (less sensitive) with one SOP"},
+            {"quantity": f"minimum detectable bias on PRN {fault['prn']}, GPS only (median "
+                         "over the flight)", "unit": "m", "published": None,
+             "reproduced": mdb_gps,
+             "note": ("noise-free bias at which the first tau reaches 1: min over modes and "
+                      "axes of T / |separation per metre of bias|")},
+            {"quantity": f"minimum detectable bias on PRN {fault['prn']}, GPS + SOP 1 (Fig. 7, "
+                         "Theorem 1)", "unit": "m", "published": None, "reproduced": mdb_sop,
+             "note": "Theorem 1: larger with one SOP (same separations, larger thresholds)"},
+            {"quantity": f"noise-free detection time of the PRN {fault['prn']} ramp, GPS only",
+             "unit": "s", "published": None, "reproduced": f_gps["t_detect_noise_free"],
+             "note": "ramp = minimum detectable bias, interpolated between epochs"},
+            {"quantity": f"noise-free detection time of the PRN {fault['prn']} ramp, GPS + "
+                         "SOP 1", "unit": "s", "published": None,
+             "reproduced": f_sop["t_detect_noise_free"],
+             "note": ("the delay one SOP causes; the noisy detection times above are quantised "
+                      "to the epoch spacing and cannot show it")},
         ]
         metrics = {
             "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris), "epochs": n_t,
@@ -478,6 +531,12 @@ class Seed004Uav(Study):
             "fault_statistic_max_abs_difference_m": sep_diff,
             "fault_threshold_ratio_median": thr_ratio,
             "fault_tau_reduction_median": float(np.median(f_gps["tau_mode"] - f_sop["tau_mode"])),
+            "fault_mdb_median_gps_m": mdb_gps, "fault_mdb_median_sop1_m": mdb_sop,
+            "fault_mdb_ratio_median": float(np.median(f_sop["mdb"] / f_gps["mdb"])),
+            "detection_time_noise_free_gps_s": f_gps["t_detect_noise_free"],
+            "detection_time_noise_free_sop1_s": f_sop["t_detect_noise_free"],
+            "detection_delay_noise_free_s": (f_sop["t_detect_noise_free"]
+                                             - f_gps["t_detect_noise_free"]),
         }
         if excl is not None:
             metrics.update({
@@ -537,8 +596,10 @@ class Seed004Uav(Study):
         a1.set_ylabel("m")
         a1.set_title(f"Seed 004 Fig. 7: PRN {a['fault_prn']} fault mode, ramp "
                      f"{a['fault_ramp_mps']:g} m/s from {a['fault_onset_s']:g} s; detected at "
-                     f"{a['t_detect_gps_s']:.1f} s (GPS) vs {a['t_detect_sop1_s']:.1f} s (+SOP 1)",
-                     fontsize=8)
+                     f"{a['t_detect_gps_s']:.1f} s (GPS) vs {a['t_detect_sop1_s']:.1f} s (+SOP 1)"
+                     f"\nnoise-free (bias = minimum detectable bias): "
+                     f"{a['t_detect_noise_free_gps_s']:.3f} s vs "
+                     f"{a['t_detect_noise_free_sop1_s']:.3f} s", fontsize=8)
         a1.legend(fontsize=7)
         a2.plot(t, ds["fault_tau_gps"].values - ds["fault_tau_sop1"].values, color="k", lw=0.8)
         a2.set_ylabel("tau GPS - tau GPS+SOP 1")

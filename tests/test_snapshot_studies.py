@@ -43,6 +43,16 @@ def test_uav_gps_fault_detected_and_theorem1(uav):
     assert m["fault_statistic_max_abs_difference_m"] < 1e-6
     assert m["fault_threshold_ratio_median"] > 1.0
     assert m["detection_time_sop1_s"] >= m["detection_time_gps_s"]
+    # the noise-free view of the same (Fig. 7): a larger minimum detectable bias at every epoch,
+    # by the ratio of the K_fa factors (the separations per metre are the same), so the ramp is
+    # detected strictly later, by the MDB increase over the ramp rate
+    ds = uav.dataset
+    ratio = ds["fault_mdb_sop1_m"].values / ds["fault_mdb_gps_m"].values
+    assert np.all(np.isfinite(ratio)) and np.all(ratio > 1.0)
+    assert 1.0 < m["fault_mdb_ratio_median"] < 1.1
+    t_gps, t_sop = m["detection_time_noise_free_gps_s"], m["detection_time_noise_free_sop1_s"]
+    assert 4.0 < t_gps < t_sop < 12.2
+    assert m["detection_delay_noise_free_s"] == t_sop - t_gps
 
 
 def test_vehicle_small_run():
