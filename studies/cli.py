@@ -164,7 +164,8 @@ def bench(
     m = b.bench_mhss(batch=16_384 if quick else 65_536, ref_geometries=50 if quick else 200)
     res["mhss"] = m
     out.print(f"MHSS PLs (9 GPS + 4 SOPs, Table I, {m['n_modes']} modes): "
-              f"{m['jax_pl_per_s']:,.0f} PL/s (batch {m['batch']:,}, best of 5)",
+              f"{m['jax_pl_per_s']:,.0f} PL/s (batch {m['batch']:,}, best of 5, "
+              f"{m['threads']} host threads; one thread {m['one_thread_pl_per_s']:,.0f} PL/s)",
               highlight=False)
     if "speedup" in m:
         out.print(f"  NumPy reference: {m['reference_pl_per_s']:,.1f} PL/s -> "

@@ -645,8 +645,8 @@ def test_root_finder_q_and_density_match_scipy():
 
 def test_threaded_split_is_bit_identical_to_one_call():
     """araim.batching.map_threads: parts of whole chunks on host threads give exactly the bits
-    of one call, for batches that split evenly, unevenly, into 3 parts, or not at all (fewer
-    than 2 chunks per thread)."""
+    of one call, for a batch that splits unevenly into 2 or 3 parts, and one that is not split
+    (fewer than 2 chunks per thread)."""
     from araim.batching import CHUNK
     from araim.mhss import prepare_inputs, protection_levels_threaded
     from studies.bench import mhss_bench_inputs
@@ -656,8 +656,9 @@ def test_threaded_split_is_bit_identical_to_one_call():
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I
     one = protection_levels_threaded(args, budget, 1, threads=1)
-    for n, threads in ((6 * CHUNK + 37, 2), (6 * CHUNK + 37, 3), (4 * CHUNK, 2),
-                       (3 * CHUNK, 2)):
+    # shapes compiled: 1573 (one call), 1024 (2 parts of 4 chunks), 768 (3 parts of 3 chunks,
+    # and the unsplit 3-chunk batch)
+    for n, threads in ((6 * CHUNK + 37, 2), (6 * CHUNK + 37, 3), (3 * CHUNK, 2)):
         part = tuple(a[:n] for a in args)
         ref = one if n == 6 * CHUNK + 37 else protection_levels_threaded(part, budget, 1,
                                                                          threads=1)
