@@ -85,14 +85,16 @@ def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK):
     repeating its first geometry, as ``map_chunks`` does, and the padding dropped), and each
     part has more than one chunk, so every geometry is computed in the same chunk, at the same
     position, by the same compiled chunk program as in one call: the results are bit-identical
-    to ``fn(*arrays)`` (tested). Batches of fewer than ``2 threads`` chunks are one call.
+    to ``fn(*arrays)`` (tested). Batches of fewer than ``2 threads`` chunks are one call, and
+    so is a call traced inside the caller's ``jit`` (threads cannot share a trace).
     """
     threads = default_threads() if threads is None else int(threads)
     n = 1
     for d in batch_shape:
         n *= d
     n_chunks = -(-n // chunk)
-    if threads <= 1 or n_chunks < 2 * threads:
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(arrays))
+    if threads <= 1 or n_chunks < 2 * threads or traced:  # under a caller's jit: inline
         return fn(*arrays)
     per = -(-n_chunks // threads) * chunk  # geometries per part, whole chunks
     flat = [jnp.asarray(x).reshape((n,) + x.shape[len(batch_shape):]) for x in arrays]

@@ -666,5 +666,10 @@ def test_threaded_split_is_bit_identical_to_one_call():
         for name, a, b in zip(got._fields, got, ref, strict=True):
             assert a.shape == b.shape and np.array_equal(np.asarray(a), np.asarray(b)), name
     assert np.all(np.isfinite(np.asarray(one.hpl_m)))
+    # inside a caller's jit the split is skipped (threads cannot share a trace): same bits
+    part = args  # 7 chunks: split into 2 parts were it not traced
+    jitted = jax.jit(lambda *a: araim.protection_levels(*a[:7], budget, a[7], max_order=1,
+                                                        threads=2).hpl_m)(*part)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(one.hpl_m), rtol=1e-12)
     with pytest.raises(ValueError, match="threads"):
         araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
