@@ -14,8 +14,8 @@ results only by rounding (last bits), never by more.
 """
 
 import concurrent.futures
+import math
 import os
-import threading
 
 import jax
 import jax.numpy as jnp
@@ -24,28 +24,41 @@ import jax.numpy as jnp
 CHUNK = 256
 
 
+def _flatten(arrays, batch_shape):
+    """(arrays with one flat leading batch axis, its length n)."""
+    n = math.prod(batch_shape)
+    return [jnp.asarray(x).reshape((n,) + x.shape[len(batch_shape):]) for x in arrays], n
+
+
+def _pad_to(flat, size):
+    """Pad the flat batch to ``size`` by repeating the first geometry: a real geometry, so no
+    special cases inside the kernel; the caller drops the padding."""
+    pad = size - flat[0].shape[0]
+    if not pad:
+        return flat
+    return [jnp.concatenate([x, jnp.broadcast_to(x[:1], (pad,) + x.shape[1:])]) for x in flat]
+
+
+def _unflatten(out, batch_shape, n):
+    """Drop the padding and restore ``batch_shape`` on every output leaf."""
+    return jax.tree.map(lambda y: y[:n].reshape(tuple(batch_shape) + y.shape[1:]), out)
+
+
 def map_chunks(fn, arrays, batch_shape, chunk=CHUNK):
     """Apply ``fn`` to arrays whose leading axes are ``batch_shape`` in chunks of ``chunk``.
 
     ``fn`` takes the arrays with one flattened leading batch axis and returns a pytree of
     arrays with that leading axis; the result has ``batch_shape`` restored.
     """
-    n = 1
-    for d in batch_shape:
-        n *= d
-    flat = [x.reshape((n,) + x.shape[len(batch_shape):]) for x in arrays]
+    flat, n = _flatten(arrays, batch_shape)
     if n <= chunk:
-        out = fn(*flat)
-    else:
-        n_chunks = -(-n // chunk)
-        pad = n_chunks * chunk - n
-        # pad by repeating the first geometry: a real geometry, so no special cases inside
-        flat = [jnp.concatenate([x, jnp.broadcast_to(x[:1], (pad,) + x.shape[1:])])
-                if pad else x for x in flat]
-        stacked = [x.reshape((n_chunks, chunk) + x.shape[1:]) for x in flat]
-        out = jax.lax.map(lambda xs: fn(*xs), stacked)
-        out = jax.tree.map(lambda y: y.reshape((n_chunks * chunk,) + y.shape[2:])[:n], out)
-    return jax.tree.map(lambda y: y.reshape(tuple(batch_shape) + y.shape[1:]), out)
+        return _unflatten(fn(*flat), batch_shape, n)
+    n_chunks = -(-n // chunk)
+    flat = _pad_to(flat, n_chunks * chunk)
+    stacked = [x.reshape((n_chunks, chunk) + x.shape[1:]) for x in flat]
+    out = jax.lax.map(lambda xs: fn(*xs), stacked)
+    out = jax.tree.map(lambda y: y.reshape((n_chunks * chunk,) + y.shape[2:]), out)
+    return _unflatten(out, batch_shape, n)
 
 
 def default_threads():
@@ -64,48 +77,30 @@ def default_threads():
     return n
 
 
-_POOL = None
-_POOL_LOCK = threading.Lock()
-
-
-def _pool(threads):
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None or _POOL._max_workers < threads:
-            _POOL = concurrent.futures.ThreadPoolExecutor(threads, thread_name_prefix="oaraim")
-        return _POOL
-
-
 def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK):
     """``fn(*arrays)`` for a jitted batch-first ``fn`` that evaluates in ``map_chunks`` chunks,
     run as ``threads`` equal parts side by side on host threads (JAX releases the GIL while
     XLA runs), outputs concatenated.
 
-    The parts start at multiples of ``chunk`` and hold whole chunks (the batch is padded by
-    repeating its first geometry, as ``map_chunks`` does, and the padding dropped), and each
-    part has more than one chunk, so every geometry is computed in the same chunk, at the same
-    position, by the same compiled chunk program as in one call: the results are bit-identical
-    to ``fn(*arrays)`` (tested). Batches of fewer than ``2 threads`` chunks are one call, and
-    so is a call traced inside the caller's ``jit`` (threads cannot share a trace).
+    The parts start at multiples of ``chunk`` and hold whole chunks (the batch is padded as
+    ``map_chunks`` pads it, and the padding dropped), and each part has more than one chunk, so
+    every geometry is computed in the same chunk, at the same position, by the same compiled
+    chunk program as in one call: the results are bit-identical to ``fn(*arrays)`` (tested).
+    Batches of fewer than ``2 threads`` chunks are one call, and so is a call traced inside
+    the caller's ``jit`` (threads cannot share a trace).
     """
     threads = default_threads() if threads is None else int(threads)
-    n = 1
-    for d in batch_shape:
-        n *= d
-    n_chunks = -(-n // chunk)
+    n_chunks = -(-math.prod(batch_shape) // chunk)
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(arrays))
     if threads <= 1 or n_chunks < 2 * threads or traced:  # under a caller's jit: inline
         return fn(*arrays)
     per = -(-n_chunks // threads) * chunk  # geometries per part, whole chunks
-    flat = [jnp.asarray(x).reshape((n,) + x.shape[len(batch_shape):]) for x in arrays]
-    pad = per * threads - n
-    if pad:
-        flat = [jnp.concatenate([x, jnp.broadcast_to(x[:1], (pad,) + x.shape[1:])])
-                for x in flat]
+    flat, n = _flatten(arrays, batch_shape)
+    flat = _pad_to(flat, per * threads)
 
     def part(i):
         return jax.block_until_ready(fn(*(x[i * per:(i + 1) * per] for x in flat)))
 
-    outs = list(_pool(threads).map(part, range(threads)))
-    out = jax.tree.map(lambda *ys: jnp.concatenate(ys)[:n], *outs)
-    return jax.tree.map(lambda y: y.reshape(tuple(batch_shape) + y.shape[1:]), out)
+    with concurrent.futures.ThreadPoolExecutor(threads, thread_name_prefix="oaraim") as pool:
+        outs = list(pool.map(part, range(threads)))
+    return _unflatten(jax.tree.map(lambda *ys: jnp.concatenate(ys), *outs), batch_shape, n)
