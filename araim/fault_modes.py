@@ -55,6 +55,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from araim import linalg
+
 
 class ModeTemplate(NamedTuple):
     """Static description of the candidate fault modes (all-in-view not included).
@@ -132,6 +134,9 @@ def group_probabilities(valid, constellation, p_sat, p_const) -> GroupProbabilit
         p2 = p2 + p1 * pl
         p1 = p1 * (1.0 - pl) + p0 * pl
         p0 = p0 * (1.0 - pl)
+    # stored once: left alone, XLA fused the 3 x L-step recursion into every element of the
+    # (L, C, B) consumers below (measured: 5 % of the whole MHSS kernel)
+    p0, p1, p2 = (linalg.materialize(x) for x in (p0, p1, p2))
     n_sources = jnp.sum(member, axis=0)
     present = n_sources > 0
     pc = jnp.where(present, p_const, 0.0)

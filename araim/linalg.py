@@ -17,6 +17,17 @@ import jax.numpy as jnp
 RELATIVE_PIVOT_TOLERANCE = 1e-10
 
 
+def materialize(x):
+    """Identity (NaN stays NaN) that XLA computes once and stores. XLA's fusion duplicates a
+    cheap elementwise producer into every consumer, also into one that broadcasts it; here that
+    repeated a whole unrolled solve for every element of an (L, L, B) product (measured: most
+    of the kernel). A division is 'expensive' for XLA and is never duplicated that way."""
+    if not jnp.issubdtype(x.dtype, jnp.floating):  # labels and masks: exact through float64
+        y = x.astype(jnp.float64)
+        return (y / (y == y).astype(y.dtype)).astype(x.dtype)
+    return x / (x == x).astype(x.dtype)
+
+
 def inverse_variance_weights(sigma_m, valid):
     """w = 1 / sigma^2 for valid sources and 0 for padding (whatever its sigma holds)."""
     return jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)

@@ -49,8 +49,11 @@ PL_TOLERANCE_M = 1e-3
 #: orders up to 3): 5 iterations leave 41, 8 leave 9, 12 leave 1, 16 none; order 1 needs 5;
 #: the 9 GPS + 4 SOP bench case 3. Non-convergence is reported, never hidden.
 PL_ITERATIONS = 20
-#: a Newton step shorter than this ends the iteration of its element (the PL tolerance is 1e-3 m)
-NEWTON_STEP_TOL_M = 1e-7
+#: a Newton step shorter than this ends the iteration of its element (the PL tolerance is 1e-3 m):
+#: below the root the step is then taken without evaluation (its error is ~ step^2), above it
+#: the PL is the last iterate, at most this (+ PL_MARGIN_M) above the root. 1e-7 m cost one more
+#: evaluation per chunk (measured: 3 instead of 2 loop iterations, 9 GPS + 4 SOPs)
+NEWTON_STEP_TOL_M = 1e-5
 #: the PL returned is the converged Newton iterate plus this (covers the iterate's error, which
 #: after a step below NEWTON_STEP_TOL_M is of the order of that step squared)
 PL_MARGIN_M = 1e-6
@@ -145,17 +148,6 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
-def _materialize(x):
-    """Identity (NaN stays NaN) that XLA computes once and stores. XLA's fusion duplicates a
-    cheap elementwise producer into every consumer, also into one that broadcasts it; here that
-    repeated a whole unrolled solve for every element of an (L, L, B) product (measured: most
-    of the kernel). A division is 'expensive' for XLA and is never duplicated that way."""
-    if not jnp.issubdtype(x.dtype, jnp.floating):  # labels and masks: exact through float64
-        y = x.astype(jnp.float64)
-        return (y / (y == y).astype(y.dtype)).astype(x.dtype)
-    return x / (x == x).astype(x.dtype)
-
-
 def _blocks(parts):
     """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
     concatenation with the computations of its parts into one loop that branches on every
@@ -187,7 +179,7 @@ def _normal(cols, w, axis):
     n = [[None] * k for _ in range(k)]
     for i in range(k):
         for j in range(i + 1):
-            n[i][j] = n[j][i] = jnp.sum(wc[i] * cols[j], axis=axis)
+            n[i][j] = n[j][i] = linalg.materialize(_sum(wc[i] * cols[j], axis))
     return n
 
 
@@ -208,12 +200,12 @@ def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0, return_factor=
         n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
     lower, nonsingular = linalg.cholesky(n)
     zero = jnp.zeros_like(n[0][0])
-    y = [[_materialize(e) for e in linalg.cholesky_solve(
+    y = [[linalg.materialize(e) for e in linalg.cholesky_solve(
         lower, [zero + (1.0 if j == q else 0.0) for j in range(n_states)])] for q in range(3)]
     # S_q,l = w_l sum_a (N^-1)_{q a} H_{l a}
     s_pos = jnp.stack([w * sum(y[q][a][:, None, :] * cols[a] for a in range(n_states))
                        for q in range(3)], axis=1)  # (M, 3, L, B)
-    s_pos = _materialize(jnp.where(nonsingular[:, None, None, :], s_pos, 0.0))
+    s_pos = linalg.materialize(jnp.where(nonsingular[:, None, None, :], s_pos, 0.0))
     var_pos = jnp.stack([y[q][q] for q in range(3)], axis=1)  # (M, 3, B)
     ref = s_pos[:1] if s0 is None else s0[None]
     bias = 0.0
@@ -221,7 +213,7 @@ def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0, return_factor=
     for m in range(w.shape[1]):  # loops over sources: one fused (M, 3, B) loop each
         bias = bias + jnp.abs(s_pos[:, :, m]) * b_nom[m]
         ss2 = ss2 + (s_pos[:, :, m] - ref[:, :, m]) ** 2 * var_acc[m]
-    bias, sigma_ss = _materialize(bias), _materialize(jnp.sqrt(ss2))
+    bias, sigma_ss = linalg.materialize(bias), linalg.materialize(jnp.sqrt(ss2))
     if return_factor:
         return s_pos, var_pos, bias, sigma_ss, nonsingular, lower
     return s_pos, var_pos, bias, sigma_ss, nonsingular
@@ -237,8 +229,8 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0, var0):
     lists of (B,) arrays) and variances var0 (3, B) by rank-one downdates (Sherman-Morrison;
     DESIGN.md performance notes). u_l is solved from the factor, not multiplied by an explicit
     inverse: the worst subsets here have condition numbers ~1e8.
-    u_l is stored once (``_materialize``): left to itself XLA fused the whole solve into every
-    element of the (L, L, B) products below (13x recomputation, most of the kernel).
+    u_l is stored once (``linalg.materialize``): left to itself XLA fused the whole solve into
+    every element of the (L, L, B) products below (13x recomputation, most of the kernel).
 
     With u_l = N0^-1 h_l, P_lm = h_l^T N0^-1 h_m and r_l = 1 - w_l P_ll:
         N_l^-1 = N0^-1 + w_l u_l u_l^T / r_l
@@ -251,7 +243,7 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0, var0):
     L = w_int.shape[0]
     h = [c[0] for c in cols]  # (L, B)
     lower_l = [[None if e is None else e[None] for e in row] for row in lower0]
-    u = [_materialize(x) for x in linalg.cholesky_solve(lower_l, h)]  # n (L, B): N0^-1 h_l
+    u = [linalg.materialize(x) for x in linalg.cholesky_solve(lower_l, h)]  # n (L, B): N0^-1 h_l
     p = sum(h[a][:, None, :] * u[a][None, :, :] for a in range(n_states))  # (L, L, B)
     s0 = jnp.stack([w_int * u[q] for q in range(3)], axis=0)  # (3, L, B)
     p_ll = sum(h[a] * u[a] for a in range(n_states))  # (L, B)
@@ -259,7 +251,8 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0, var0):
     ok = r > SINGLE_REDUNDANCY_TOLERANCE
     r_safe = jnp.where(ok, r, 1.0)
     eye = jnp.eye(L, dtype=bool)[:, :, None]
-    c = _materialize(jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :]))
+    c = linalg.materialize(
+        jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :]))
     u_pos = jnp.stack(u[:3], axis=1)  # (L, 3, B): u_l,q
     s_pos = s0[None] + u_pos[:, :, None, :] * c[:, None, :, :]  # (L, 3, L, B), m = l wrong
     s_pos = jnp.where(eye[:, None], 0.0, s_pos)
@@ -277,7 +270,7 @@ def _single_modes(w_int, cols, b_nom, var_acc, lower0, var0):
     sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
     # stored before they are concatenated with the other modes (a concatenation fused with
     # the sums above ran one scalar loop per output element)
-    var_pos, bias, sigma_ss = (_materialize(x) for x in (var_pos, bias, sigma_ss))
+    var_pos, bias, sigma_ss = (linalg.materialize(x) for x in (var_pos, bias, sigma_ss))
     return s0, var0, s_pos, var_pos, bias, sigma_ss, ok
 
 
@@ -291,17 +284,17 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
     # fused consumer reads them with a stride
     g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
-        _materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+        linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
                                   valid))
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
-    g = _materialize(jnp.where(valid[:, None, :], g, 0.0))
-    w_int = _materialize(linalg.inverse_variance_weights(
+    g = linalg.materialize(jnp.where(valid[:, None, :], g, 0.0))
+    w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
-    var_acc = _materialize(jnp.where(valid, var_acc, 0.0))
+    var_acc = linalg.materialize(jnp.where(valid, var_acc, 0.0))
     var_int = jnp.where(valid, var_int, 0.0)
-    b_nom = _materialize(jnp.where(valid, b_nom, 0.0))
-    member = _materialize(
+    b_nom = linalg.materialize(jnp.where(valid, b_nom, 0.0))
+    member = linalg.materialize(
         valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None]))
     cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
     cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
@@ -366,7 +359,7 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     nf = jnp.maximum(n_modes, 1).astype(dtype)
     k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
     k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
-    k_fa = _materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
+    k_fa = linalg.materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
     threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
     prior = jnp.where(monitored, prior_all, 0.0)
@@ -405,15 +398,39 @@ def _risk(x, coef, mean, inv_sd):
     return jnp.sum(coef * q, axis=0), jnp.sum(coef * inv_sd * phi, axis=0)
 
 
-def _bound_factors(coef, rhs):
-    """Per-term factors of the bracket of ``solve_pl``: (active, big, k_lo, k_hi) with the
-    bracket ends max_j mean_j + sd_j k_j over the active (lo) or big (hi) terms (-inf: none).
+#: A&S 26.2.23 (Abramowitz & Stegun, Handbook, 1964): Q^-1(p) ~ t - (c0 + c1 t + c2 t^2) /
+#: (1 + d1 t + d2 t^2 + d3 t^3), t = sqrt(-2 ln p), for 0 < p <= 1/2, |error| < 4.5e-4 (measured
+#: 4.44e-4 against scipy.special.ndtri on a log grid over [1e-300, 0.5]: tests/test_mhss.py)
+_AS_C = (2.515517, 0.802853, 0.010328)
+_AS_D = (1.432788, 0.189269, 0.001308)
+#: the bracket ends use the approximation widened by this (more than twice its error bound)
+Q_INVERSE_APPROX_MARGIN = 1e-3
 
-    lo: one term alone reaches the budget. hi: terms that cannot reach the budget even
-    together (coef < rhs, total D < rhs) are bounded by D; the other n_big terms get
-    (rhs - D) / n_big each. Without that split, one mode with a tiny prior and a huge mean
-    (e.g. an SOP-only subset) pushed hi to hundreds of metres and regula falsi crawled.
-    These depend on coef and rhs only, not on mean and sd."""
+
+def q_inverse_approx(p):
+    """Q^-1(p) for 0 < p < 1 to within 4.5e-4 (A&S 26.2.23, by symmetry above 1/2): one log,
+    one square root and one division, against two logs and three branches of ndtri. The root
+    finder's bracket only has to be valid, so it uses this widened by
+    ``Q_INVERSE_APPROX_MARGIN`` (measured: the exact ndtri per term and bracket end was 28 % of
+    the whole MHSS kernel)."""
+    upper = p > 0.5
+    t = jnp.sqrt(-2.0 * jnp.log(jnp.where(upper, 1.0 - p, p)))
+    k = t - (_AS_C[0] + t * (_AS_C[1] + t * _AS_C[2])) / (
+        1.0 + t * (_AS_D[0] + t * (_AS_D[1] + t * _AS_D[2])))
+    return jnp.where(upper, -k, k)
+
+
+def _bound_factors(coef, rhs):
+    """Per-term factors of the bracket of ``solve_pl``: (k_start, k_hi) with the start and the
+    bracket ends max_j mean_j + sd_j k_j (k = -inf: the term does not count).
+
+    lo: one term alone reaches the budget (there k_lo = k_start - ``Q_INVERSE_APPROX_MARGIN``
+    <= Q^-1(rhs / coef)); the start uses the approximate Q^-1 itself. hi: terms that cannot
+    reach the budget even together (coef < rhs, total D < rhs) are bounded by D; the other
+    n_big terms get (rhs - D) / n_big each (k_hi >= Q^-1 of that share, Chernoff). Without
+    that split, one mode with a tiny prior and a huge mean (e.g. an SOP-only subset) pushed hi
+    to hundreds of metres and regula falsi crawled. These depend on coef and rhs only, not on
+    mean and sd."""
     active = coef > 0
     safe = jnp.where(active, coef, 1.0)
     small = active & (coef < rhs[None])
@@ -421,14 +438,19 @@ def _bound_factors(coef, rhs):
     split = d_small < rhs
     big = active & ~(small & split[None])
     n_big = jnp.sum(big, axis=0).astype(coef.dtype)
-    budget_big = jnp.where(split, rhs - d_small, rhs)
+    # (stored: fused into the per-term consumers, the two sums over terms ran once per term)
+    share = linalg.materialize(jnp.where(split, rhs - d_small, rhs) / n_big)
     p_lo = rhs[None] / safe
-    p_hi = budget_big[None] / (n_big[None] * safe)
     active = active & (p_lo < 1)
-    big = big & (p_hi < 1)
-    k_lo = q_inverse(jnp.where(active, p_lo, 0.5))
-    k_hi = q_inverse(jnp.where(big, p_hi, 0.5))
-    return active, big, k_lo, k_hi
+    big = big & (share[None] < safe)  # p_hi = share / coef < 1
+    k_start = jnp.where(active, q_inverse_approx(jnp.where(active, p_lo, 0.5)), -jnp.inf)
+    # Chernoff: Q(k) <= exp(-k^2 / 2) / 2, so k = sqrt(-2 ln(2 p)) (0 for p >= 1/2) has
+    # Q(k) <= p: a valid upper end, up to ~0.5 sd looser than Q^-1 (only the rare secant
+    # fallback sees it), with ln coef once per term (coef may come without the right-hand
+    # sides' axis) and a square root per term and right-hand side
+    log_2p_hi = jnp.log(2.0 * share)[None] - jnp.log(jnp.where(coef > 0, coef, 1.0))
+    k_hi = jnp.where(big, jnp.sqrt(jnp.maximum(-2.0 * log_2p_hi, 0.0)), -jnp.inf)
+    return k_start, k_hi
 
 
 def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
@@ -441,12 +463,13 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
 
     Safeguarded Newton on h(x) = z(rhs) - z(R(x)), z(S) = sqrt(-2 log S): for one dominant term
     c Q((x - m)/s), z is nearly (x - m)/s, almost linear in x, and the derivative costs one
-    multiply per term (the density shares erfc's exponential). Start at the lower bracket end
-    and keep a bracket [a, b] with h(a) >= 0 >= h(b); a Newton step that leaves it, or that is
+    multiply per term (the density shares erfc's exponential). Start where the largest single
+    term alone meets the budget (to within A&S's 4.5e-4 sd: ``q_inverse_approx``) and keep a
+    bracket [a, b] with h(a) >= 0 >= h(b); a Newton step that leaves it, or that is
     not shorter than half the previous step (Numerical Recipes' rtsafe rule: Newton creeps from
     the flat side of a kink where the dominant term changes), is replaced by an Illinois regula
-    falsi step between the bracket ends (bisection until h(b) is known). An element whose
-    Newton step falls below ``NEWTON_STEP_TOL_M``, or whose bracket is narrower than
+    falsi step between the bracket ends (bisection until both ends are evaluated points). An
+    element whose Newton step falls below ``NEWTON_STEP_TOL_M``, or whose bracket is narrower than
     ``PL_TOLERANCE_M``, is frozen: its values no longer change, so an element gets exactly what
     a fixed ``iterations``-step loop would give it, whatever the rest of the batch needs. The
     loop stops when every element is frozen or after ``iterations`` (the bound that keeps it a
@@ -456,10 +479,13 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
     element is reported not converged otherwise.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
-    active, big, k_lo, k_hi = _bound_factors(coef, rhs) if factors is None else factors
-    lo = jnp.max(jnp.where(active, mean + sd * k_lo, -jnp.inf), axis=0)
-    hi = jnp.max(jnp.where(big, mean + sd * k_hi, -jnp.inf), axis=0)
-    hi = jnp.maximum(hi, lo)
+    k_start, k_hi = _bound_factors(coef, rhs) if factors is None else factors
+
+    def end(k, shift=0.0):  # max_j mean_j + sd_j (k_j + shift) over the terms with k_j > -inf
+        return jnp.max(jnp.where(k > -jnp.inf, mean + sd * (k + shift), -jnp.inf), axis=0)
+
+    lo, start = end(k_start, -Q_INVERSE_APPROX_MARGIN), end(k_start)
+    hi = jnp.maximum(end(k_hi), start)
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
     inv_sd = 1.0 / sd
 
@@ -478,8 +504,11 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
         step = hx / slope
         newton = x + step
         # finite, nonzero slope: z > 0 there (R < 1), so the step is a real Newton step
+        # (a narrow bracket only counts once both ends are evaluated points: the unevaluated
+        # ends from ``q_inverse_approx`` lie within ~1e-3 sd of the root, and freezing there
+        # returned PLs up to 2.3e-4 m above the root instead of ~1e-6 m)
         frozen = done | ((jnp.abs(step) <= NEWTON_STEP_TOL_M) & (slope < jnp.inf)) | (
-            b - a <= PL_TOLERANCE_M)
+            (b - a <= PL_TOLERANCE_M) & (ha == ha) & (hb == hb))
         # where Newton leaves the bracket or does not halve the previous step (the flat side of
         # a kink, from where Newton creeps; Numerical Recipes' rtsafe rule), take the secant
         # of the bracket ends (regula falsi; h is nearly linear in z space)
@@ -506,23 +535,26 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
                                                    frozen)
         return i + 1, a, b, ha, hb, xn, hx, slope, last, right, frozen, xn2
 
-    h0, s0 = h_and_slope(lo)
-    h0 = jnp.maximum(h0, 0.0)  # h(lo) >= 0 by construction; clip rounding
-    done0 = hi - lo <= PL_TOLERANCE_M
-    # h(hi) <= 0 by construction; its value is only needed by the secant fallback, which
-    # bisects until b has moved (NaN: no secant), so it is not evaluated
-    h_hi = jnp.full_like(hi, jnp.nan)
+    h0, s0 = h_and_slope(start)
+    done0 = jnp.zeros(lo.shape, bool)
+    # h(lo) >= 0 >= h(hi) by construction; their values are only needed by the secant
+    # fallback, which bisects until both ends are evaluated points (NaN: no secant), so they
+    # are not evaluated
+    unknown = jnp.full_like(hi, jnp.nan)
     last0 = jnp.full_like(lo, jnp.inf)
-    a, b, ha, hb, right, frozen, xn = propose(lo, hi, h0, h_hi, lo, h0, s0, last0,
+    a, b, ha, hb, right, frozen, xn = propose(lo, hi, unknown, unknown, start, h0, s0, last0,
                                               jnp.zeros(lo.shape, bool), done0)
-    _, a, b, _, _, x, hx, _, _, _, _, _ = jax.lax.while_loop(cond, body, (
-        jnp.int32(0), a, b, ha, hb, lo, h0, s0, last0, right, frozen, xn))
+    _, a, b, _, _, x, hx, slope, _, _, _, _ = jax.lax.while_loop(cond, body, (
+        jnp.int32(0), a, b, ha, hb, start, h0, s0, last0, right, frozen, xn))
     right = hx <= 0  # (a, b) already hold the last evaluated point x (``propose``)
     narrow = b - a <= PL_TOLERANCE_M
-    # pl = x + margin. h(x) <= 0 puts the root below x, so pl >= root, and h(pl - tol) >= 0
-    # proves pl - tol <= root; h(x) > 0 puts the root above x (> pl - tol), and h(pl) <= 0
-    # proves pl >= root. The same pl on either side: rounding at the root cannot move it by tol.
-    pl_newton = x + PL_MARGIN_M
+    # h(x) <= 0 puts the root below x: pl = x + margin >= root, and h(pl - tol) >= 0 proves
+    # pl - tol <= root. h(x) > 0 puts the root above x: pl = x + step + margin with the last
+    # Newton step (not evaluated; its error is of the order of step^2) when that step is at
+    # most tol / 2, so that pl - tol < x < root, and h(pl) <= 0 proves pl >= root.
+    step = hx / slope
+    step = jnp.where((step > 0) & (step <= 0.5 * PL_TOLERANCE_M), step, 0.0)
+    pl_newton = x + jnp.where(right, 0.0, step) + PL_MARGIN_M
     h_probe = h_and_slope(jnp.where(right, pl_newton - PL_TOLERANCE_M, pl_newton))[0]
     proved = jnp.where(right, h_probe >= 0, h_probe <= 0)
     pl = jnp.where(proved, pl_newton, b)
@@ -536,9 +568,9 @@ def _pls_from_projection(pr, budget, iterations):
     rhs_hv = jnp.where(rhs_hv > 0, rhs_hv, budget.phmi_v)  # status marks P_nm > P_thresh
     coef = pr.prior.at[0].set(2.0)[:, None]  # (K, 1, B)
     # east and north share the right-hand side: bracket factors (Q^-1 per term) once for both
-    factors = tuple(jnp.stack([f[:, 0], f[:, 0], f[:, 1]], axis=1)
-                    for f in _bound_factors(jnp.broadcast_to(coef, coef.shape[:1] + rhs_hv.shape),
-                                            rhs_hv))
+    # (stored before the stack: fused into it, they were computed once per output element)
+    factors = tuple(jnp.stack([f[:, 0], f[:, 0], f[:, 1]], axis=1) for f in (
+        linalg.materialize(k) for k in _bound_factors(coef, rhs_hv)))
     rhs = jnp.stack([rhs_hv[0], rhs_hv[0], rhs_hv[1]], axis=0)  # (3, B)
     pl, converged = solve_pl(coef, pr.threshold + pr.bias, pr.sigma, rhs, iterations, factors)
     status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=0),

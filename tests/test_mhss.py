@@ -643,6 +643,27 @@ def test_root_finder_q_and_density_match_scipy():
     assert np.all(np.abs(phi / phi_ref - 1.0) < 1e-15 + 4.0 * z * np.finfo(float).eps)
 
 
+def test_root_finder_bracket_q_inverse_bounds():
+    """The bracket of ``solve_pl`` rests on two bounds of Q^-1(p), checked against SciPy's
+    ndtri on a log grid over [1e-300, 1/2] and on (1/2, 1):
+    - ``q_inverse_approx`` (A&S 26.2.23, published |error| < 4.5e-4) stays within 4.5e-4, so
+      k_lo = approx - Q_INVERSE_APPROX_MARGIN (1e-3) is below Q^-1 (lower end valid);
+    - the Chernoff end sqrt(-2 ln 2p) (0 above p = 1/2) is never below Q^-1 (upper end
+      valid), and at most 0.52 above it for p >= 1e-300."""
+    from araim.mhss import Q_INVERSE_APPROX_MARGIN, q_inverse_approx
+
+    p_low = np.logspace(-300.0, np.log10(0.5), 200_001)
+    p = np.concatenate([p_low, 1.0 - p_low[p_low > 1e-15], np.linspace(0.3, 0.7, 20_001)])
+    exact = -special.ndtri(p)
+    k = np.asarray(jax.jit(q_inverse_approx)(p))
+    err = np.abs(k - exact)
+    assert err.max() < 4.5e-4
+    assert np.all(k - Q_INVERSE_APPROX_MARGIN < exact)
+    chernoff = np.sqrt(np.maximum(-2.0 * np.log(2.0 * p), 0.0))
+    assert np.all(chernoff >= exact - 1e-12)
+    assert np.max((chernoff - exact)[p <= 0.5]) < 0.52
+
+
 def test_threaded_split_is_bit_identical_to_one_call():
     """araim.batching.map_threads: parts of whole chunks on host threads give exactly the bits
     of one call, for a batch that splits unevenly into 2 or 3 parts, and one that is not split
