@@ -52,21 +52,22 @@ def normal_entries(cols, w):
     return n
 
 
-def cholesky(n):
+def cholesky(n, scale=None):
     """Unrolled Cholesky factor of a symmetric K x K matrix given as nested lists.
 
     Returns:
       (lower, ok): ``lower[i][j]`` for j <= i, and a boolean array, False where a pivot fell
-      below ``RELATIVE_PIVOT_TOLERANCE`` times the largest diagonal entry (singular or
-      indefinite). Where not ok, the factor holds finite placeholder values: callers mask the
-      results.
+      below ``RELATIVE_PIVOT_TOLERANCE`` times ``scale`` (default: the largest diagonal entry;
+      singular or indefinite). Where not ok, the factor holds finite placeholder values:
+      callers mask the results.
     """
     k = len(n)
     lower = [[None] * k for _ in range(k)]
     ok = None
-    scale = n[0][0]
-    for j in range(1, k):
-        scale = jnp.maximum(scale, n[j][j])
+    if scale is None:
+        scale = n[0][0]
+        for j in range(1, k):
+            scale = jnp.maximum(scale, n[j][j])
     for j in range(k):
         pivot = n[j][j]
         for m in range(j):
