@@ -66,7 +66,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
         t_ref = _best_time(run_ref, 2)
         hpl_jax = np.asarray(_slope_hpl_jit(g[:ref_geometries], sigma[:ref_geometries],
                                             valid[:ref_geometries], table).hpl_m)
-        out.update(reference_geometries=ref_geometries, reference_s=t_ref,
+        out.update(reference_geometries=ref_geometries, reference_repeats=3, reference_s=t_ref,
                    reference_hpl_per_s=ref_geometries / t_ref,
                    speedup=(batch / t) / (ref_geometries / t_ref),
                    max_rel_diff=float(np.max(np.abs(hpl_jax / hpl_ref - 1))))
@@ -155,15 +155,18 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
                 xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
                 max_order=order) for i in range(ref_geometries)]
 
-        t0 = time.perf_counter()
-        refs = run_ref()
-        t_ref = time.perf_counter() - t0
+        # best of 3, as the JAX side is best of ``repeats`` after a warm-up call: one cold
+        # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
+        # (the reference measured 315-509 PL/s in three runs within 3 minutes)
+        refs = []
+        t_ref = _best_time(lambda: refs.append(run_ref()), 3)
+        refs = refs[-1]
         hpl_ref = np.array([r.hpl_m for r in refs])
         vpl_ref = np.array([r.vpl_m for r in refs])
         hpl = np.asarray(res.hpl_m[:ref_geometries])
         vpl = np.asarray(res.vpl_m[:ref_geometries])
         fin = np.isfinite(hpl_ref) & np.isfinite(hpl)
-        out.update(reference_geometries=ref_geometries, reference_s=t_ref,
+        out.update(reference_geometries=ref_geometries, reference_repeats=3, reference_s=t_ref,
                    reference_pl_per_s=ref_geometries / t_ref,
                    speedup=(batch / t) / (ref_geometries / t_ref),
                    max_abs_diff_m=float(max(np.max(np.abs(hpl - hpl_ref)[fin], initial=0),
