@@ -18,13 +18,17 @@ of shape (..., K) with K = 1 + number of candidate modes, and:
 
 All projectors are weighted with C_int^-1, S^(0) included (the ADD and MAAST; DESIGN.md);
 ``all_in_view_weighting="acc"`` restores the seed's C_acc^-1 for S^(0) (sigma^(0) is then
-sqrt(S^(0) C_int S^(0)T)_qq). A clock column whose constellation has no source left in a mode
-is dropped by putting 1 on its (otherwise all-zero) diagonal: the position block is unchanged.
+sqrt(S^(0) C_int S^(0)T)_qq). The all-in-view, single-source and whole-constellation modes
+eliminate the clock states exactly (rows centred on their constellation's weighted mean row:
+``_centered_rows``); the other modes keep one clock column per constellation, and a clock whose
+constellation has no source left in a mode is dropped by putting 1 on its (otherwise all-zero)
+diagonal: the position block is unchanged.
 
 Each PL equation is solved in log space by safeguarded Newton steps inside a bracket [lo, hi]
-that is valid by construction (lo: the largest PL at which one term alone reaches the budget;
-hi: every term at most budget / number of terms), then one evaluation proves that the returned
-(conservative, upper) PL lies within ``PL_TOLERANCE_M`` above the root.
+that is valid by construction (lo: below the largest PL at which one term alone reaches the
+budget; hi: every term at most its share of the budget; both from bounds of Q^-1), then one
+evaluation proves that the returned (conservative, upper) PL lies within ``PL_TOLERANCE_M``
+above the root.
 """
 
 from typing import NamedTuple
