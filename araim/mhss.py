@@ -51,7 +51,8 @@ PL_TOLERANCE_M = 1e-3
 #: converged). Measured (PLs not converged, of 3 per geometry) on the 2000 random geometries of
 #: tests/test_mhss.py (Table I, up to 150 modes, P_s^S up to 0.1, sigma_URA^S up to 25 m,
 #: orders up to 3): 5 iterations leave 41, 8 leave 9, 12 leave 1, 16 none; order 1 needs 5;
-#: the 9 GPS + 4 SOP bench case 3. Non-convergence is reported, never hidden.
+#: the 9 GPS + 4 SOP bench case 2 since stop 12 (Newton's last step taken unevaluated).
+#: Non-convergence is reported, never hidden.
 PL_ITERATIONS = 20
 #: a Newton step shorter than this ends the iteration of its element (the PL tolerance is 1e-3 m):
 #: below the root the step is then taken without evaluation (its error is ~ step^2), above it
@@ -348,8 +349,8 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
     # fused consumer reads them with a stride
     g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
-        linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                  valid))
+        linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat,
+                                        p_const, valid))
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
     g = linalg.materialize(jnp.where(valid[:, None, :], g, 0.0))
@@ -377,8 +378,6 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
                                              [[e[0] for e in row] for row in inv], vw[0])
         parts = {True: (sw, vw, bw, ssw, okw)}
         if whole.size < rest.size:
-            cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
-            cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
             parts[False] = _generic_modes(valid[None] & ~fm.excluded[rest[src[rest] >= 0]],
                                           w_int, cols, member, b_nom, var_acc, sw[0])
         runs, next_index = [], {True: 1, False: 0}  # [kind, start, stop] in parts[kind]
@@ -553,14 +552,16 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
     not shorter than half the previous step (Numerical Recipes' rtsafe rule: Newton creeps from
     the flat side of a kink where the dominant term changes), is replaced by an Illinois regula
     falsi step between the bracket ends (bisection until both ends are evaluated points). An
-    element whose Newton step falls below ``NEWTON_STEP_TOL_M``, or whose bracket is narrower than
-    ``PL_TOLERANCE_M``, is frozen: its values no longer change, so an element gets exactly what
-    a fixed ``iterations``-step loop would give it, whatever the rest of the batch needs. The
-    loop stops when every element is frozen or after ``iterations`` (the bound that keeps it a
-    fixed-count, jit-able solver). Then one evaluation proves the tolerance for
-    pl = x + ``PL_MARGIN_M``: h(pl - tol) >= 0 if x is at or above the root, else h(pl) <= 0;
-    where it fails, pl is the bracket's upper end if the bracket is narrower than tol, and the
-    element is reported not converged otherwise.
+    element whose Newton step falls below ``NEWTON_STEP_TOL_M``, or whose bracket between two
+    evaluated points is narrower than ``PL_TOLERANCE_M``, is frozen: its values no longer
+    change, so an element gets exactly what a fixed ``iterations``-step loop would give it,
+    whatever the rest of the batch needs. The loop stops when every element is frozen or after
+    ``iterations`` (the bound that keeps it a fixed-count, jit-able solver). Then one
+    evaluation proves the tolerance for pl = x + ``PL_MARGIN_M`` (plus the last, unevaluated
+    Newton step where x is below the root and that step is at most tol / 2): h(pl - tol) >= 0
+    if x is at or above the root, else h(pl) <= 0; where it fails, pl is the bracket's upper
+    end if the bracket is narrower than tol, and the element is reported not converged
+    otherwise.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
     k_start, k_hi = _bound_factors(coef, rhs) if factors is None else factors
