@@ -115,6 +115,19 @@ def _q_and_density(t):
     return q, e * _INV_SQRT_2PI
 
 
+def _q_and_density_fast(t):
+    """(Q(t), phi(t)) as ``_q_and_density`` with erfc's 1 <= x < 8 branch used for all x
+    (relative error of erfc below 1e-8 on [0, 1), measured against SciPy; tests/test_mhss.py):
+    for the fast path's Halley steps, whose result the probe proves with the exact Q (an error
+    of 1e-8 in R moves their root by ~1e-8 sd / z, well inside ``PL_MARGIN_M``)."""
+    x = jnp.minimum(jnp.abs(t) * _SQRT1_2, 27.0)
+    e = jnp.exp(-x * x)
+    neg = t < 0
+    q = jnp.where(neg, 1.0, 0.0) + jnp.where(neg, -0.5, 0.5) * e * _poly(_ERFC_P, x) / _poly(
+        _ERFC_Q, x)
+    return q, e * _INV_SQRT_2PI
+
+
 def q_inverse(p):
     """Q^-1(p) = -Phi^-1(p)."""
     return -ndtri(p)
@@ -545,44 +558,44 @@ def _bound_factors(coef, rhs):
 
 def _risk_curvature(x, coef, mean, inv_sd, cw, cw2):
     """(R, D, D2) at x: R and D = -R' as ``_risk``, and D2 = R'' = sum_j coef_j t_j
-    phi(t_j) / sd_j^2 (t_j = (x - mean_j) / sd_j); cw = coef / sd and cw2 = coef / sd^2."""
+    phi(t_j) / sd_j^2 (t_j = (x - mean_j) / sd_j); cw = coef / sd and cw2 = coef / sd^2. Q from
+    ``_q_and_density_fast`` (relative error < 1e-8): only the fast path's steps use this."""
     if coef.shape[0] <= UNROLL_TERMS:
         r = d = d2 = 0.0
         for j in range(coef.shape[0]):
             t = (x - mean[j]) * inv_sd[j]
-            q, phi = _q_and_density(t)
+            q, phi = _q_and_density_fast(t)
             r = r + coef[j] * q
             d = d + cw[j] * phi
             d2 = d2 + cw2[j] * (t * phi)
         return r, d, d2
     t = (x[None] - mean) * inv_sd
-    q, phi = _q_and_density(t)
+    q, phi = _q_and_density_fast(t)
     return jnp.sum(coef * q, axis=0), jnp.sum(cw * phi, axis=0), jnp.sum(cw2 * t * phi, axis=0)
 
 
 def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw):
-    """(R(x), D(x), Dl(x)) with D = -R' as ``_risk`` and R(x - delta) >= R(x) + delta Dl(x),
-    delta >= 0.
+    """(R(x), Dl(x)) with R(x - delta) >= R(x) + delta Dl(x), delta >= 0; Dl <= D = -R'(x).
 
     Per term f = coef Q((x - mean) / sd): by the mean value theorem f(x - delta) - f(x) =
     delta |f'| somewhere in [x - delta, x], and |f'| = coef phi(t) / sd is smallest at an end
     of the interval (phi is unimodal), so it is at least coef phi(t) / sd min(1, phi(t - e) /
     phi(t)), e = delta / sd, with phi(t - e) / phi(t) = exp(t e - e^2 / 2) >= 1 + t e - e^2 / 2.
-    Where t >= e / 2 (every term convex on the interval, the usual case) the factor is 1."""
+    Where t >= e / 2 (every term convex on the interval, the usual case) the factor is 1 and
+    Dl = D."""
     if coef.shape[0] <= UNROLL_TERMS:
-        r = d = dl = 0.0
+        r = dl = 0.0
         for j in range(coef.shape[0]):
             t = (x - mean[j]) * inv_sd[j]
             q, phi = _q_and_density(t)
             e = delta * inv_sd[j]
             r = r + coef[j] * q
-            d = d + cw[j] * phi
             dl = dl + cw[j] * phi * jnp.clip(1.0 + e * (t - 0.5 * e), 0.0, 1.0)
-        return r, d, dl
+        return r, dl
     t = (x[None] - mean) * inv_sd
     q, phi = _q_and_density(t)
     e = delta * inv_sd
-    return (jnp.sum(coef * q, axis=0), jnp.sum(cw * phi, axis=0),
+    return (jnp.sum(coef * q, axis=0),
             jnp.sum(cw * phi * jnp.clip(1.0 + e * (t - 0.5 * e), 0.0, 1.0), axis=0))
 
 
@@ -652,8 +665,8 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, k_start=None, ignore
 
     def probe(x):
         pl = x + PL_MARGIN_M
-        r, d, dl = _risk_lower_slope(pl, tol, coef, mean, inv_sd, cw)
-        return pl, r, d, (r <= rhs) & (r + tol * dl >= rhs)
+        r, dl = _risk_lower_slope(pl, tol, coef, mean, inv_sd, cw)
+        return pl, r, dl, (r <= rhs) & (r + tol * dl >= rhs)
 
     pl, r, d, proved = probe(x)
     settled = proved if ignore is None else proved | ignore
@@ -663,7 +676,8 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, k_start=None, ignore
 
     def newton_from_probe(carry):
         """A Newton step (z space) from the last probe point, and its probe, for the elements
-        not yet proved; the others keep their values."""
+        not yet proved; the others keep their values. The slope is the probe's Dl (= D where
+        every term is convex near the probe; smaller, so a longer step, elsewhere)."""
         i, pl, r, d, proved, settled = carry
         z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
         pl2, r2, d2, proved2 = probe(pl + (z_rhs - z) * r * z / d)
