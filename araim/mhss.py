@@ -179,6 +179,14 @@ def _blocks(parts):
     return out
 
 
+def _max(x, axis):
+    """jnp.max over a short static axis as elementwise maxima (as ``_sum``)."""
+    out = jax.lax.index_in_dim(x, 0, axis, keepdims=False)
+    for m in range(1, x.shape[axis]):
+        out = jnp.maximum(out, jax.lax.index_in_dim(x, m, axis, keepdims=False))
+    return out
+
+
 def _sum(x, axis):
     """Sum over a short static axis written out as elementwise adds: XLA fuses and vectorises
     them over the trailing batch axis, which it does not do for a reduce over a non-minor axis
@@ -525,6 +533,19 @@ def _start_factor(coef, rhs):
     return jnp.where(active, q_inverse_approx(jnp.where(active, p_lo, 0.5)), -jnp.inf)
 
 
+def _fast_start_factor(coef, rhs):
+    """The fast path's start factor: ``q_inverse_approx(rhs / coef)`` for the terms that alone
+    can reach the budget (coef > rhs; -inf for the others), with p = rhs / coef above 1/2 taken
+    as 1/2 (factor ~0; a start needs no bound) and ln p = ln rhs - ln coef: the logarithms
+    once per term and once per right-hand side, no division for p."""
+    active = coef > rhs[None]
+    log_p = jnp.log(rhs)[None] - jnp.log(jnp.where(active, coef, 1.0))
+    t = jnp.sqrt(-2.0 * jnp.minimum(log_p, -0.6931471805599453))  # ln 1/2
+    k = t - (_AS_C[0] + t * (_AS_C[1] + t * _AS_C[2])) / (
+        1.0 + t * (_AS_D[0] + t * (_AS_D[1] + t * _AS_D[2])))
+    return jnp.where(active, k, -jnp.inf)
+
+
 def _bound_factors(coef, rhs):
     """Per-term factors of the bracket of ``solve_pl``: (k_start, k_hi) with the start and the
     bracket ends max_j mean_j + sd_j k_j (k = -inf: the term does not count).
@@ -627,7 +648,7 @@ FAST_EXTRA_ROUNDS = 4
 FAST_PROOF_TOL_M = 1e-4
 
 
-def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, k_start=None, ignore=None):
+def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=None):
     """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs; terms on axis 0 (J, ...), rhs (...).
 
     Same contract as ``_solve_pl_bracketed``: returns (pl, converged), pl never below the root
@@ -645,16 +666,17 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, k_start=None, ignore
     when a chunk has such an element (``jax.lax.cond``). Each element's result depends on its
     own terms only, never on the rest of the batch.
 
-    ``k_start``: ``_start_factor(coef, rhs)`` when the caller has it (shared by equal right-hand
-    sides). ``ignore``: elements whose result the caller discards (they never trigger the
-    bracketed branch). Measured on the 9 GPS + 4 SOP bench case: every element proved after the
-    Halley steps, 3 evaluations instead of 4 plus the loop's bookkeeping, the kernel 14-16 %
-    faster.
+    ``start``: the starting point, max_j mean_j + sd_j ``_fast_start_factor``_j (about the
+    largest single-term root), when the caller has it. ``ignore``: elements whose result the
+    caller discards (they never trigger the bracketed branch). Measured on the 9 GPS + 4 SOP
+    bench case: every element proved after the Halley steps, 3 evaluations instead of 4 plus
+    the loop's bookkeeping, the kernel 14-16 % faster.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
-    if k_start is None:
-        k_start = _start_factor(coef, rhs)
-    x = jnp.max(jnp.where(k_start > -jnp.inf, mean + sd * k_start, -jnp.inf), axis=0)
+    if start is None:
+        k = _fast_start_factor(coef, rhs)
+        start = jnp.max(jnp.where(k > -jnp.inf, mean + sd * k, -jnp.inf), axis=0)
+    x = start
     inv_sd = 1.0 / sd
     cw = linalg.materialize(coef * inv_sd)
     cw2 = linalg.materialize(cw * inv_sd)
@@ -813,10 +835,12 @@ def _pls_from_projection(pr, budget, iterations):
     coef = pr.prior.at[0].set(2.0)[:, None]  # (K, 1, B)
     # east and north share the right-hand side: the start factor (Q^-1 per term) once for both
     # (stored before the stack: fused into it, it was computed once per output element)
-    k = linalg.materialize(_start_factor(coef, rhs_hv))
-    k_start = jnp.stack([k[:, 0], k[:, 0], k[:, 1]], axis=1)
+    k = [linalg.materialize(_fast_start_factor(coef[:, 0], r)) for r in rhs_hv]  # (K, B)
+    mean = pr.threshold + pr.bias
+    start = jnp.stack([_max(jnp.where(kq > -jnp.inf, mean[:, q] + pr.sigma[:, q] * kq,
+                                      -jnp.inf), 0) for q, kq in enumerate((k[0], k[0], k[1]))])
     rhs = jnp.stack([rhs_hv[0], rhs_hv[0], rhs_hv[1]], axis=0)  # (3, B)
-    pl, converged = solve_pl(coef, pr.threshold + pr.bias, pr.sigma, rhs, iterations, k_start,
+    pl, converged = solve_pl(coef, mean, pr.sigma, rhs, iterations, start,
                              ignore=(pr.status != Status.OK)[None])
     status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=0),
                        Status.NOT_CONVERGED, pr.status).astype(jnp.int8)
