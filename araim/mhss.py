@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import erfc, ndtri
+from scipy import special
 
 from araim import linalg
 from araim.batching import map_chunks, map_threads
@@ -460,9 +461,11 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma[:1], 0.0, sigma_ss)
 
     n_modes = jnp.sum(monitored, axis=0)
-    nf = jnp.maximum(n_modes, 1).astype(dtype)
-    k_h = q_inverse(budget.p_fa_h / (4.0 * nf))
-    k_v = q_inverse(budget.p_fa_v / (2.0 * nf))
+    # K_fa depends on N_f only: a table over N_f = 0..K (N_f = 0 read as 1), evaluated on the
+    # host (an ndtri per geometry and direction was 2 % of the kernel)
+    nf = np.maximum(np.arange(monitored.shape[0] + 1), 1)
+    k_h = jnp.take(jnp.asarray(-special.ndtri(budget.p_fa_h / (4.0 * nf)), dtype), n_modes)
+    k_v = jnp.take(jnp.asarray(-special.ndtri(budget.p_fa_v / (2.0 * nf)), dtype), n_modes)
     k_fa = linalg.materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
     threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
