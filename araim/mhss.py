@@ -514,6 +514,13 @@ _AS_D = (1.432788, 0.189269, 0.001308)
 Q_INVERSE_APPROX_MARGIN = 1e-3
 
 
+def _as_26_2_23(t):
+    """A&S 26.2.23 in terms of t = sqrt(-2 ln p): Q^-1(p) ~ t - (c0 + c1 t + c2 t^2) /
+    (1 + d1 t + d2 t^2 + d3 t^3) for 0 < p <= 1/2."""
+    return t - (_AS_C[0] + t * (_AS_C[1] + t * _AS_C[2])) / (
+        1.0 + t * (_AS_D[0] + t * (_AS_D[1] + t * _AS_D[2])))
+
+
 def q_inverse_approx(p):
     """Q^-1(p) for 0 < p < 1 to within 4.5e-4 (A&S 26.2.23, by symmetry above 1/2): one log,
     one square root and one division, against two logs and three branches of ndtri. The root
@@ -522,8 +529,7 @@ def q_inverse_approx(p):
     the whole MHSS kernel)."""
     upper = p > 0.5
     t = jnp.sqrt(-2.0 * jnp.log(jnp.where(upper, 1.0 - p, p)))
-    k = t - (_AS_C[0] + t * (_AS_C[1] + t * _AS_C[2])) / (
-        1.0 + t * (_AS_D[0] + t * (_AS_D[1] + t * _AS_D[2])))
+    k = _as_26_2_23(t)
     return jnp.where(upper, -k, k)
 
 
@@ -546,9 +552,7 @@ def _fast_start_factor(coef, rhs, log_coef=None):
     if log_coef is None:
         log_coef = jnp.log(jnp.where(coef > 0, coef, 1.0))
     t = jnp.sqrt(-2.0 * jnp.minimum(jnp.log(rhs)[None] - log_coef, -0.6931471805599453))
-    k = t - (_AS_C[0] + t * (_AS_C[1] + t * _AS_C[2])) / (
-        1.0 + t * (_AS_D[0] + t * (_AS_D[1] + t * _AS_D[2])))
-    return jnp.where(active, k, -jnp.inf)
+    return jnp.where(active, _as_26_2_23(t), -jnp.inf)
 
 
 def _bound_factors(coef, rhs):
