@@ -24,11 +24,14 @@ eliminate the clock states exactly (rows centred on their constellation's weight
 constellation has no source left in a mode is dropped by putting 1 on its (otherwise all-zero)
 diagonal: the position block is unchanged.
 
-Each PL equation is solved in log space by safeguarded Newton steps inside a bracket [lo, hi]
-that is valid by construction (lo: below the largest PL at which one term alone reaches the
-budget; hi: every term at most its share of the budget; both from bounds of Q^-1), then one
-evaluation proves that the returned (conservative, upper) PL lies within ``PL_TOLERANCE_M``
-above the root.
+Each PL equation is solved in log space (``solve_pl``): two Halley steps from the largest
+single-term root, then one evaluation proves that the returned (conservative, upper) PL lies
+within ``FAST_PROOF_TOL_M`` above the root (R(PL) <= rhs, and a lower bound of the slope below
+PL gives R(PL - tol) >= rhs). What that does not prove takes a few Newton rounds and then, in a
+branch run only where needed, safeguarded Newton steps inside a bracket [lo, hi] that is valid
+by construction (lo: below the largest PL at which one term alone reaches the budget; hi: every
+term at most its share of the budget; both from bounds of Q^-1), proved within
+``PL_TOLERANCE_M``.
 """
 
 from typing import NamedTuple
