@@ -36,6 +36,11 @@ def _geometries(n, seed=0):
                                   jnp.concatenate([el, t.el_rad], -1))
 
 
+#: passes of the NumPy references (best of), also reported as ``reference_repeats``
+SLOPE_REFERENCE_REPEATS = 2
+MHSS_REFERENCE_REPEATS = 3
+
+
 def _best_time(fn, repeats):
     best = np.inf
     for _ in range(repeats):
@@ -63,10 +68,11 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
             return [np.max(ref.slopes_reference(gi, 1.0)) * sq for gi in gn]
 
         hpl_ref = np.array(run_ref())
-        t_ref = _best_time(run_ref, 2)
+        t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
         hpl_jax = np.asarray(_slope_hpl_jit(g[:ref_geometries], sigma[:ref_geometries],
                                             valid[:ref_geometries], table).hpl_m)
-        out.update(reference_geometries=ref_geometries, reference_repeats=2, reference_s=t_ref,
+        out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
+                   reference_s=t_ref,
                    reference_hpl_per_s=ref_geometries / t_ref,
                    speedup=(batch / t) / (ref_geometries / t_ref),
                    max_rel_diff=float(np.max(np.abs(hpl_jax / hpl_ref - 1))))
@@ -159,14 +165,15 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
         # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
         # (the reference measured 315-509 PL/s in three runs within 3 minutes)
         refs = []
-        t_ref = _best_time(lambda: refs.append(run_ref()), 3)
+        t_ref = _best_time(lambda: refs.append(run_ref()), MHSS_REFERENCE_REPEATS)
         refs = refs[-1]
         hpl_ref = np.array([r.hpl_m for r in refs])
         vpl_ref = np.array([r.vpl_m for r in refs])
         hpl = np.asarray(res.hpl_m[:ref_geometries])
         vpl = np.asarray(res.vpl_m[:ref_geometries])
         fin = np.isfinite(hpl_ref) & np.isfinite(hpl)
-        out.update(reference_geometries=ref_geometries, reference_repeats=3, reference_s=t_ref,
+        out.update(reference_geometries=ref_geometries, reference_repeats=MHSS_REFERENCE_REPEATS,
+                   reference_s=t_ref,
                    reference_pl_per_s=ref_geometries / t_ref,
                    speedup=(batch / t) / (ref_geometries / t_ref),
                    max_abs_diff_m=float(max(np.max(np.abs(hpl - hpl_ref)[fin], initial=0),
