@@ -675,8 +675,8 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     Elements the proof does not cover take up to ``FAST_EXTRA_ROUNDS`` Newton steps from their
     probe point, each with its own probe (a loop that ends at once when every element is
     proved). What is still not proved is solved by the bracketed solver, in a branch taken only
-    when a chunk has such an element (a loop of at most one pass). Each element's result
-    depends on its own terms only, never on the rest of the batch.
+    when a chunk has such an element (``jax.lax.cond``). Each element's result depends on its
+    own terms only, never on the rest of the batch.
 
     ``start``: the starting point, max_j mean_j + sd_j ``_fast_start_factor``_j (about the
     largest single-term root), when the caller has it. ``ignore``: elements whose result the
@@ -722,17 +722,11 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     _, pl, _, _, proved, settled = jax.lax.while_loop(more, newton_from_probe, (
         jnp.int32(0), pl, r, d, proved, settled))
 
-    def bracketed(carry):
-        _, pl, proved = carry
+    def bracketed(_):
         pl_b, converged_b = _solve_pl_bracketed(coef, mean, sd, rhs, iterations)
-        return jnp.bool_(True), jnp.where(proved, pl, pl_b), proved | converged_b
+        return jnp.where(proved, pl, pl_b), proved | converged_b
 
-    # a loop that runs its body at most once, not ``jax.lax.cond``: with a conditional here XLA's
-    # CPU compiler crashed (segmentation fault) compiling ``araim.solution_separation`` late in
-    # the full test suite, twice in a row at the same test (never when run alone)
-    _, pl, proved = jax.lax.while_loop(lambda carry: ~carry[0], bracketed,
-                                       (jnp.all(settled), pl, proved))
-    return pl, proved
+    return jax.lax.cond(jnp.all(settled), lambda _: (pl, proved), bracketed, None)
 
 
 def _solve_pl_bracketed(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
