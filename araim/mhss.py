@@ -492,12 +492,18 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
 #: up to this many terms the risk sum is written out term by term (one fused loop over the
 #: batch, no (terms, ...) temporary and no reduction over a non-minor axis)
 UNROLL_TERMS = 64
+#: ... and for the rarely run parts of ``solve_pl`` (its Newton rounds and bracketed fallback):
+#: none, one array over the terms. Written out, each of their 4 evaluation sites is a separate
+#: copy of the per-term loops, and compiling the kernel took twice as long (measured, bench
+#: inputs: order 1 9.5 s -> 5.3 s, order 2 19.5 s -> 8.6 s; the full test suite, which
+#: compiles it dozens of times, 11 -> 19 min). The bench case never runs them
+RARE_UNROLL_TERMS = 0
 
 
-def _risk(x, coef, mean, inv_sd):
+def _risk(x, coef, mean, inv_sd, unroll_terms=UNROLL_TERMS):
     """(R, D): R(x) = sum_j coef_j Q((x - mean_j) / sd_j) and D(x) = -dR/dx = sum_j coef_j
     phi((x - mean_j) / sd_j) / sd_j >= 0; terms on axis 0, x of shape coef.shape[1:]."""
-    if coef.shape[0] <= UNROLL_TERMS:
+    if coef.shape[0] <= unroll_terms:
         r = d = 0.0
         for j in range(coef.shape[0]):
             q, phi = _q_and_density((x - mean[j]) * inv_sd[j])
@@ -607,7 +613,7 @@ def _risk_curvature(x, coef, mean, inv_sd, cw, cw2):
     return jnp.sum(coef * q, axis=0), jnp.sum(cw * phi, axis=0), jnp.sum(cw2 * t * phi, axis=0)
 
 
-def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw):
+def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw, unroll_terms=UNROLL_TERMS):
     """(R(x), Dl(x)) with R(x - delta) >= R(x) + delta Dl(x), delta >= 0; Dl <= D = -R'(x).
 
     Per term f = coef Q((x - mean) / sd): by the mean value theorem f(x - delta) - f(x) =
@@ -616,7 +622,7 @@ def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw):
     phi(t)), e = delta / sd, with phi(t - e) / phi(t) = exp(t e - e^2 / 2) >= 1 + t e - e^2 / 2.
     Where t >= e / 2 (every term convex on the interval, the usual case) the factor is 1 and
     Dl = D."""
-    if coef.shape[0] <= UNROLL_TERMS:
+    if coef.shape[0] <= unroll_terms:
         r = dl = 0.0
         for j in range(coef.shape[0]):
             t = (x - mean[j]) * inv_sd[j]
@@ -697,9 +703,9 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
         x = _halley_step(x, *_risk_curvature(x, coef, mean, inv_sd, cw, cw2), z_rhs)
     tol = FAST_PROOF_TOL_M
 
-    def probe(x):
+    def probe(x, unroll_terms=UNROLL_TERMS):
         pl = x + PL_MARGIN_M
-        r, dl = _risk_lower_slope(pl, tol, coef, mean, inv_sd, cw)
+        r, dl = _risk_lower_slope(pl, tol, coef, mean, inv_sd, cw, unroll_terms)
         return pl, r, dl, (r <= rhs) & (r + tol * dl >= rhs)
 
     pl, r, d, proved = probe(x)
@@ -714,7 +720,7 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
         every term is convex near the probe; smaller, so a longer step, elsewhere)."""
         i, pl, r, d, proved, settled = carry
         z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
-        pl2, r2, d2, proved2 = probe(pl + (z_rhs - z) * r * z / d)
+        pl2, r2, d2, proved2 = probe(pl + (z_rhs - z) * r * z / d, RARE_UNROLL_TERMS)
         keep = lambda old, new: jnp.where(settled, old, new)  # noqa: E731
         return (i + 1, keep(pl, pl2), keep(r, r2), keep(d, d2), keep(proved, proved2),
                 settled | proved2)
@@ -723,13 +729,15 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
         jnp.int32(0), pl, r, d, proved, settled))
 
     def bracketed(_):
-        pl_b, converged_b = _solve_pl_bracketed(coef, mean, sd, rhs, iterations)
+        pl_b, converged_b = _solve_pl_bracketed(coef, mean, sd, rhs, iterations,
+                                                unroll_terms=RARE_UNROLL_TERMS)
         return jnp.where(proved, pl, pl_b), proved | converged_b
 
     return jax.lax.cond(jnp.all(settled), lambda _: (pl, proved), bracketed, None)
 
 
-def _solve_pl_bracketed(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None):
+def _solve_pl_bracketed(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=None,
+                        unroll_terms=UNROLL_TERMS):
     """Root of sum_j coef_j Q((PL - mean_j)/sd_j) = rhs; terms on axis 0 (J, ...), rhs (...).
 
     coef >= 0 (terms with coef 0 are ignored; their sd must still be > 0), rhs > 0, and at least
@@ -769,7 +777,7 @@ def _solve_pl_bracketed(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=N
 
     def h_and_slope(x):
         """h(x) and -h'(x) = z'(R) >= 0 (inf where R >= 1, i.e. z = 0)."""
-        r, d = _risk(x, coef, mean, inv_sd)
+        r, d = _risk(x, coef, mean, inv_sd, unroll_terms)
         z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
         return z_rhs - z, d / (r * z)
 

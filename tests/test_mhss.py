@@ -747,6 +747,23 @@ def test_halley_step_one_term_closed_form():
     assert 0.3 < ratio < 3, ratio
 
 
+def test_risk_sums_unrolled_and_vectorised_agree():
+    """The two forms of the risk sums (terms written out, for the fast path; one array over the
+    terms, for the rarely run parts of ``solve_pl``, cheaper to compile) give the same R, D and
+    lower slope to rounding (summation order only)."""
+    from araim.mhss import _risk, _risk_lower_slope
+
+    coef, mean, sd, rhs = _random_pl_terms(3)
+    x = mean.max(axis=0) + sd.max(axis=0)
+    inv_sd = 1.0 / sd
+    for f, args in ((_risk, (x, coef, mean, inv_sd)),
+                    (_risk_lower_slope, (x, 1e-4, coef, mean, inv_sd, coef * inv_sd))):
+        unrolled = jax.jit(lambda *a, f=f: f(*a, unroll_terms=64))(*args)
+        vectorised = jax.jit(lambda *a, f=f: f(*a, unroll_terms=0))(*args)
+        for u, v in zip(unrolled, vectorised, strict=True):
+            np.testing.assert_allclose(np.asarray(v), np.asarray(u), rtol=1e-13, atol=0)
+
+
 def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     """``solve_pl`` on 4000 hard random PL equations (24 terms, priors from 1/10 of the budget
     to 0.1, means up to 60 m, sd 0.3-100 m): every PL is at or above the exact root (SciPy
@@ -760,7 +777,7 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     root = _roots(coef, mean, sd, rhs)
 
     def solve(rounds=mhss.FAST_EXTRA_ROUNDS, bracketed=True):
-        def no_bracketed(coef, mean, sd, rhs, iterations):
+        def no_bracketed(coef, mean, sd, rhs, iterations, **_):
             return jnp.full(rhs.shape, jnp.nan), jnp.zeros(rhs.shape, bool)
         with pytest.MonkeyPatch.context() as mp:
             if not bracketed:
