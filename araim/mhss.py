@@ -496,7 +496,7 @@ UNROLL_TERMS = 64
 #: none, one array over the terms. Written out, each of their 4 evaluation sites is a separate
 #: copy of the per-term loops, and compiling the kernel took twice as long (measured, bench
 #: inputs: order 1 9.5 s -> 5.3 s, order 2 19.5 s -> 8.6 s; the full test suite, which
-#: compiles it dozens of times, 11 -> 19 min). The bench case never runs them
+#: compiles it dozens of times, 19 -> 15 min). The bench case never runs them
 RARE_UNROLL_TERMS = 0
 
 
