@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from araim import linalg
+from araim.batching import jit_kernel
 from araim.budget import IntegrityBudget
 from araim.fault_modes import to_batch_first, to_batch_last
 from araim.mhss import (
@@ -86,7 +87,7 @@ def _flatten(arrays, batch):
     return [x.reshape((-1,) + x.shape[len(batch):]) for x in arrays]
 
 
-@partial(jax.jit, static_argnames=("budget", "max_order", "weighting", "iterations"))
+@partial(jit_kernel, static_argnames=("budget", "max_order", "weighting", "iterations"))
 def _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y, budget,
                 max_order, weighting="int", iterations=PL_ITERATIONS):
     batch = g.shape[:-2]
@@ -112,7 +113,7 @@ def _wsse(g, constellation, var_int, valid, y, n_constellations):
     return jnp.where(ok, jnp.sum(w * r**2, axis=-1), jnp.inf)
 
 
-@partial(jax.jit, static_argnames=("budget", "max_order", "weighting", "iterations"))
+@partial(jit_kernel, static_argnames=("budget", "max_order", "weighting", "iterations"))
 def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
                         budget, max_order, weighting="int", iterations=PL_ITERATIONS):
     top = _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,

@@ -43,7 +43,7 @@ from jax.scipy.special import erfc, ndtri
 from scipy import special
 
 from araim import linalg
-from araim.batching import map_chunks, map_threads
+from araim.batching import jit_kernel, map_chunks, map_threads
 from araim.budget import IntegrityBudget
 from araim.fault_modes import fault_modes_batch_last, mode_template, to_batch_first, to_batch_last
 from araim.status import Status
@@ -909,7 +909,7 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
     return map_chunks(kernel, arrays, batch)
 
 
-_protection_levels_jit = jax.jit(
+_protection_levels_jit = jit_kernel(
     _protection_levels,
     static_argnames=("budget", "max_order", "all_in_view_weighting", "iterations"))
 

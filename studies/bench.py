@@ -185,7 +185,7 @@ def profile_mhss(batch=65_536, repeats=3):
     """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding, in CPU
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
     import araim
-    from araim.batching import map_chunks
+    from araim.batching import jit_kernel, map_chunks
     from araim.fault_modes import fault_modes_batch_last
     from araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
 
@@ -207,7 +207,7 @@ def profile_mhss(batch=65_536, repeats=3):
                     out = _pls_from_projection(pr, budget, PL_ITERATIONS)[0]
             return jnp.moveaxis(out, -1, 0)
 
-        f = jax.jit(lambda *xs: map_chunks(kernel, xs, (batch,)))
+        f = jit_kernel(lambda *xs: map_chunks(kernel, xs, (batch,)))
         jax.block_until_ready(f(*arrays))
         best = np.inf
         for _ in range(repeats):  # CPU time: steadier than wall time on a shared machine

@@ -33,6 +33,7 @@ import numpy as np
 import xarray as xr
 
 import geometry
+from araim.batching import jit_kernel
 from mc.sweep import Count, Mean
 from studies import seed004_common as c
 from studies.base import Param, StudyResult, SweepStudy, axis, count, positive, probability
@@ -41,7 +42,7 @@ from studies.base import Param, StudyResult, SweepStudy, axis, count, positive, 
 TOL_M = 2e-3
 
 
-@functools.partial(jax.jit, static_argnames=("n_sops", "max_order"))
+@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order"))
 def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
                d_min_m, d_max_m, h_min_m, h_max_m, max_order):
     """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
@@ -59,7 +60,7 @@ def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_co
     return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
 
 
-@jax.jit
+@jit_kernel
 def gps_kernel(keys, t_az, t_el, t_valid):
     """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
     epoch, az, el, v = jax.vmap(lambda k: c.draw_gps(k, t_az, t_el, t_valid))(keys)

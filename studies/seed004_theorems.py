@@ -32,6 +32,7 @@ import numpy as np
 import xarray as xr
 
 import geometry
+from araim.batching import jit_kernel
 from araim.error_models import gnss_variances, sop_variances
 from araim.fde import _separation
 from araim.status import Status
@@ -88,7 +89,7 @@ def _sep(x, valid):
                        x["p_sat"], x["p_const"], valid, x["y"], budget=c.BUDGET, max_order=1)
 
 
-@jax.jit
+@jit_kernel
 def theorem_kernel(keys, n_gps):
     """Per realization flags and magnitudes; ``n_gps`` is traced (one compilation)."""
     x, v_old, v_new, big = jax.vmap(lambda k: draw(k, n_gps))(keys)
