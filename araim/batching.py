@@ -26,9 +26,10 @@ import jax.numpy as jnp
 #: machines are Sapphire Rapids (AVX-512). Measured 2026-12-02, 9 GPS + 4 SOPs, batch 65,536,
 #: interleaved in one process (8 rounds, best of 3 each): 2 host threads 458-463k PL/s (median)
 #: against 395-407k with 256 (+13-16 %); one core (taskset) 2.9-3.1 against 3.4-3.5 CPU-us per
-#: PL. Every output bit-identical on the bench batch and in tests/test_mhss.py (elementwise
-#: IEEE operations give the same lanes at any width; no reduction here runs across the
-#: vectorised batch axis). On a processor without AVX-512 LLVM uses the widest vectors it has;
+#: PL. Every output bit-identical (elementwise IEEE operations give the same lanes at any
+#: width; no reduction here runs across the vectorised batch axis): tested on the bench case
+#: (tests/test_mhss.py), checked once on the 2000 random geometries of that file at orders 1-3
+#: and on the FDE outputs. On a processor without AVX-512 LLVM uses the widest vectors it has;
 #: other backends ignore the option. Other kernels (slopes, EKF, sky) are not measured with it
 #: and keep XLA's default.
 KERNEL_COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 512}
