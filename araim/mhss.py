@@ -990,7 +990,7 @@ def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_
 
 def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                       budget, valid=None, *, max_order=None, all_in_view_weighting="int",
-                      threads=None, pool=None):
+                      threads=None):
     """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
 
     Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int
@@ -1013,9 +1013,6 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
       threads: host threads over which a large batch is split (default
         ``araim.batching.default_threads()``: ``OARAIM_THREADS`` or 2); results do not depend
         on it.
-      pool: an ``araim.pool.KernelPool``: the batch is computed by its worker processes, one
-        pinned to each core (faster than threads on a multi-core machine; same bits).
-        Excludes ``threads``.
 
     Returns:
       ``MHSSResult``; every PL is inf where status != OK, never NaN.
@@ -1034,25 +1031,7 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
         max_order = check_int("max_order", max_order, 1)
     if threads is not None:
         threads = check_int("threads", threads, 1)
-    if pool is not None:
-        from araim.pool import KernelPool
-
-        if threads is not None:
-            raise ValueError("give threads or pool, not both (a pool's workers are processes, "
-                             "one per core)")
-        if not isinstance(pool, KernelPool):
-            raise ValueError(f"pool must be an araim.pool.KernelPool, got {type(pool).__name__}")
-        out = pool.map(protection_levels_flat, args, args[0].shape[:-2], static=dict(
-            budget=budget, max_order=max_order, all_in_view_weighting=all_in_view_weighting))
-        return MHSSResult(*(jnp.asarray(x) for x in out))
     return protection_levels_threaded(args, budget, max_order, all_in_view_weighting, threads)
-
-
-def protection_levels_flat(*args, budget, max_order, all_in_view_weighting):
-    """The jitted kernel on ``prepare_inputs`` output with one flat batch axis: what a
-    ``KernelPool`` worker runs on its part."""
-    return _protection_levels_jit(*args, budget=budget, max_order=max_order,
-                                  all_in_view_weighting=all_in_view_weighting)
 
 
 def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="int",
