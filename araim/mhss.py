@@ -43,7 +43,7 @@ from jax.scipy.special import erfc, ndtri
 from scipy import special
 
 from araim import linalg
-from araim.batching import jit_kernel, map_chunks, map_threads
+from araim.batching import jit_kernel, map_chunks, map_threads, slice_rows
 from araim.budget import IntegrityBudget
 from araim.fault_modes import fault_modes_batch_last, mode_template, to_batch_first, to_batch_last
 from araim.status import Status
@@ -913,6 +913,19 @@ _protection_levels_jit = jit_kernel(
     _protection_levels,
     static_argnames=("budget", "max_order", "all_in_view_weighting", "iterations"))
 
+
+def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_weighting="int",
+                            iterations=PL_ITERATIONS):
+    """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
+    program (``araim.batching.map_threads``'s ``part_fn``)."""
+    return _protection_levels(*slice_rows(args, start, size), budget, max_order,
+                              all_in_view_weighting, iterations)
+
+
+_protection_levels_part_jit = jit_kernel(
+    _protection_levels_part,
+    static_argnames=("size", "budget", "max_order", "all_in_view_weighting", "iterations"))
+
 #: ``max_order=None`` picks the smallest order meeting P_thresh over the batch, up to this
 MAX_AUTO_ORDER = 3
 
@@ -940,33 +953,53 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
         ("var_int_m2", var_int_m2), ("var_acc_m2", var_acc_m2), ("b_nom_m", b_nom_m),
         ("p_sat", p_sat))}
     try:
-        v = np.asarray(valid)
-        checks = {
-            "var_int_m2": lambda x: np.isfinite(x) & (x > 0),
-            "var_acc_m2": lambda x: np.isfinite(x) & (x > 0),
-            "b_nom_m": lambda x: np.isfinite(x) & (x >= 0),
-            "p_sat": lambda x: (x >= 0) & (x < 1),
-        }
-        for name, good in checks.items():
-            x = np.asarray(arrays[name])
-            bad = v & ~good(x)
-            if bad.any():
-                value = float(x[bad].ravel()[0])
-                raise ValueError(f"{name} of a valid source is invalid: {value!r} "
-                                 "(variances must be finite and > 0 (m^2), biases >= 0 (m), "
-                                 "probabilities in [0, 1))")
-        pc = np.asarray(p_const)
-        if not np.all((pc >= 0) & (pc < 1)):
-            raise ValueError("p_const must lie in [0, 1), got "
-                             f"{float(pc[~((pc >= 0) & (pc < 1))][0])!r}")
-        lab = np.asarray(constellation)
-        if np.any(v & ((lab < 0) | (lab >= C))):
-            raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
-                             f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
+        _check_inputs(arrays, p_const, constellation, valid, C)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         pass  # traced: the caller validates outside jit
     return (g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"], arrays["b_nom_m"],
             arrays["p_sat"], p_const, valid)
+
+
+#: what a valid source's value must satisfy: (lowest, whether the lowest is allowed, upper
+#: bound, exclusive)
+_INPUT_RANGES = {"var_int_m2": (0.0, False, np.inf), "var_acc_m2": (0.0, False, np.inf),
+                 "b_nom_m": (0.0, True, np.inf), "p_sat": (0.0, True, 1.0)}
+
+
+def _in_range(x, lo, lo_ok, hi):
+    """x lies in the range (NaN never does)."""
+    return ((x >= lo) if lo_ok else (x > lo)) & (x < hi)
+
+
+def _check_inputs(arrays, p_const, constellation, valid, C):
+    """ValueError naming the first argument out of range at a valid source. Fast path: the
+    minimum and maximum over every source, valid or not (two passes without temporaries); the
+    masked elementwise test only when that fails, to find a valid offender and its value.
+    Measured 2026-12-02, bench batch (65,536 x 13): 2.0 ms against 3.3 ms for the masked
+    test alone."""
+    v = None
+    for name, (lo, lo_ok, hi) in _INPUT_RANGES.items():
+        x = np.asarray(arrays[name])
+        if x.size == 0 or (_in_range(x.min(), lo, lo_ok, hi) and _in_range(x.max(), lo, lo_ok,
+                                                                            hi)):
+            continue
+        v = np.asarray(valid) if v is None else v
+        bad = v & ~_in_range(x, lo, lo_ok, hi)
+        if bad.any():
+            value = float(x[bad].ravel()[0])
+            raise ValueError(f"{name} of a valid source is invalid: {value!r} "
+                             "(variances must be finite and > 0 (m^2), biases >= 0 (m), "
+                             "probabilities in [0, 1))")
+    pc = np.asarray(p_const)
+    if not np.all((pc >= 0) & (pc < 1)):
+        raise ValueError("p_const must lie in [0, 1), got "
+                         f"{float(pc[~((pc >= 0) & (pc < 1))][0])!r}")
+    lab = np.asarray(constellation)
+    if lab.size and (lab.min() < 0 or lab.max() >= C):
+        v = np.asarray(valid) if v is None else v
+        if np.any(v & ((lab < 0) | (lab >= C))):
+            raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
+                             f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
 
 
 def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_ORDER):
@@ -1038,8 +1071,13 @@ def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="i
                                threads=None):
     """The jitted kernel on ``prepare_inputs`` output, large batches split over host threads
     (``araim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores)."""
-    def fn(*xs):
-        return _protection_levels_jit(*xs, budget=budget, max_order=max_order,
-                                      all_in_view_weighting=all_in_view_weighting)
+    static = dict(budget=budget, max_order=max_order,
+                  all_in_view_weighting=all_in_view_weighting)
 
-    return map_threads(fn, args, args[0].shape[:-2], threads)
+    def fn(*xs):
+        return _protection_levels_jit(*xs, **static)
+
+    def part_fn(start, size, *xs):
+        return _protection_levels_part_jit(start, *xs, size=size, **static)
+
+    return map_threads(fn, args, args[0].shape[:-2], threads, part_fn=part_fn)

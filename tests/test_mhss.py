@@ -624,6 +624,34 @@ def test_bad_input_is_rejected_with_the_field_name():
                                 max_order=1)
 
 
+@pytest.mark.parametrize("name, value, match", [
+    ("var_int_m2", np.nan, "var_int_m2"), ("var_int_m2", np.inf, "var_int_m2"),
+    ("var_acc_m2", 0.0, "var_acc_m2"), ("b_nom_m", -1e-9, "b_nom_m"),
+    ("b_nom_m", np.nan, "b_nom_m"), ("p_sat", 1.0, "p_sat"), ("p_sat", -1e-12, "p_sat"),
+    ("constellation", 2, "constellation labels"), ("constellation", -1, "constellation labels")])
+def test_input_checks_see_valid_sources_only(name, value, match):
+    """``prepare_inputs``' range checks (fast path on the minimum and maximum, masked test when
+    that fails): a bad value at a valid source raises naming its argument; the same value at a
+    source marked invalid (padding, whatever it holds) is accepted."""
+    from araim.mhss import prepare_inputs
+
+    keys = ["g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const",
+            "valid"]
+    base = dict(zip(keys, (np.asarray(a).copy() for a in _gps_only(8)), strict=True))
+    base["g"], base["valid"] = np.stack([base["g"]] * 3), np.stack([base["valid"]] * 3)
+    for k in ("constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat"):
+        base[k] = np.stack([base[k]] * 3)
+    base["valid"][1, 5] = False
+    prepare_inputs(*(base[k] for k in keys))  # the clean batch passes
+    padded = {k: v.copy() for k, v in base.items()}
+    padded[name][1, 5] = value
+    prepare_inputs(*(padded[k] for k in keys))  # at an invalid source: accepted
+    used = {k: v.copy() for k, v in base.items()}
+    used[name][2, 3] = value
+    with pytest.raises(ValueError, match=match):
+        prepare_inputs(*(used[k] for k in keys))
+
+
 def test_root_finder_q_and_density_match_scipy():
     """The root finder's (Q, phi) pair against SciPy: Q to 1e-14 relative wherever
     Q > 1e-29 (its docstring claims 1e-15 against erfc; SciPy's ndtr adds its own rounding),
