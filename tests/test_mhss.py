@@ -630,9 +630,11 @@ def test_bad_input_is_rejected_with_the_field_name():
     ("b_nom_m", np.nan, "b_nom_m"), ("p_sat", 1.0, "p_sat"), ("p_sat", -1e-12, "p_sat"),
     ("constellation", 2, "constellation labels"), ("constellation", -1, "constellation labels")])
 def test_input_checks_see_valid_sources_only(name, value, match):
-    """``prepare_inputs``' range checks (fast path on the minimum and maximum, masked test when
-    that fails): a bad value at a valid source raises naming its argument; the same value at a
-    source marked invalid (padding, whatever it holds) is accepted."""
+    """The range checks, on the host (``prepare_inputs``: fast path on the minimum and maximum,
+    masked test when that fails) and in the kernel (``protection_levels`` with ``max_order``
+    given: ``_input_flags``, then the host check for the message): a bad value at a valid
+    source raises naming its argument; the same value at a source marked invalid (padding,
+    whatever it holds) is accepted, and the PLs are those of the clean batch."""
     from araim.mhss import prepare_inputs
 
     keys = ["g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const",
@@ -643,13 +645,22 @@ def test_input_checks_see_valid_sources_only(name, value, match):
         base[k] = np.stack([base[k]] * 3)
     base["valid"][1, 5] = False
     prepare_inputs(*(base[k] for k in keys))  # the clean batch passes
+    clean = araim.protection_levels(*(base[k] for k in keys[:7]), budget(), base["valid"],
+                                    max_order=1)
     padded = {k: v.copy() for k, v in base.items()}
     padded[name][1, 5] = value
     prepare_inputs(*(padded[k] for k in keys))  # at an invalid source: accepted
+    got = araim.protection_levels(*(padded[k] for k in keys[:7]), budget(), padded["valid"],
+                                  max_order=1)
+    np.testing.assert_array_equal(np.asarray(got.hpl_m), np.asarray(clean.hpl_m))
     used = {k: v.copy() for k, v in base.items()}
     used[name][2, 3] = value
     with pytest.raises(ValueError, match=match):
         prepare_inputs(*(used[k] for k in keys))
+    for max_order in (1, None):  # in the kernel, and on the host before required_order
+        with pytest.raises(ValueError, match=match):
+            araim.protection_levels(*(used[k] for k in keys[:7]), budget(), used["valid"],
+                                    max_order=max_order)
 
 
 def test_root_finder_q_and_density_match_scipy():
