@@ -65,6 +65,8 @@ CHUNK = 256
 def _flatten(arrays, batch_shape):
     """(arrays with one flat leading batch axis, its length n)."""
     n = math.prod(batch_shape)
+    if len(batch_shape) == 1:  # already flat: no reshape dispatch per array (~60 us each)
+        return [jnp.asarray(x) for x in arrays], n
     return [jnp.asarray(x).reshape((n,) + x.shape[len(batch_shape):]) for x in arrays], n
 
 
