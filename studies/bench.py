@@ -14,7 +14,7 @@ import numpy as np
 
 import geometry
 from araim.chi2 import lambda_det_table
-from araim.slopes import _slope_hpl_jit
+from araim.slopes import _slope_hpl_chunked
 
 
 def load_reference():
@@ -55,7 +55,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
     sigma = jnp.ones(g.shape[:-1])
     valid = jnp.ones(g.shape[:-1], bool)
     table = jnp.asarray(lambda_det_table(1e-5, 1e-3, 5))
-    run = lambda: _slope_hpl_jit(g, sigma, valid, table).hpl_m.block_until_ready()  # noqa: E731
+    run = lambda: _slope_hpl_chunked(g, sigma, valid, table).hpl_m.block_until_ready()  # noqa: E731
     run()  # compile
     t = _best_time(run, repeats)
     out = {"batch": batch, "jax_s": t, "jax_hpl_per_s": batch / t}
@@ -69,7 +69,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
 
         hpl_ref = np.array(run_ref())
         t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
-        hpl_jax = np.asarray(_slope_hpl_jit(g[:ref_geometries], sigma[:ref_geometries],
+        hpl_jax = np.asarray(_slope_hpl_chunked(g[:ref_geometries], sigma[:ref_geometries],
                                             valid[:ref_geometries], table).hpl_m)
         out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
                    reference_s=t_ref,
