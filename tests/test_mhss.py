@@ -663,6 +663,34 @@ def test_input_checks_see_valid_sources_only(name, value, match):
                                     max_order=max_order)
 
 
+def test_required_order_is_the_largest_per_geometry_order():
+    """``max_order=None``: ``required_order`` (one jitted pass over the batch) picks the largest
+    of the oracle's per-geometry orders (``reference_mhss.fault_mode_set``), capped at 3, for
+    random batches of 1-4 present constellations with P_s 1e-6..1e-2 and P_const 1e-9..1e-3;
+    and each single geometry gets its own order."""
+    from araim.mhss import required_order
+
+    rng = np.random.default_rng(7)
+    n, n_src, n_const = 400, 10, 4
+    valid = rng.random((n, n_src)) < 0.85
+    lab = rng.integers(0, n_const, (n, n_src))
+    p_sat = 10.0 ** rng.uniform(-6, -2, (n, n_src))
+    p_const = 10.0 ** rng.uniform(-9, -3, (n, n_const))
+    p_thresh = araim.BUDGET_SEED004_TABLE_I.p_thresh
+    orders = np.array([ref.fault_mode_set(valid[i], lab[i], p_sat[i], p_const[i], p_thresh,
+                                          3).order for i in range(n)])
+    assert set(orders) == {1, 2, 3}  # the batch spans every order
+    for i in range(40):
+        assert required_order(valid[i:i + 1], lab[i:i + 1], p_sat[i:i + 1], p_const[i:i + 1],
+                              p_thresh) == orders[i], i
+    low = np.flatnonzero(orders <= 2)
+    assert required_order(valid[low], lab[low], p_sat[low], p_const[low], p_thresh) == 2
+    assert required_order(valid.reshape(2, n // 2, n_src), lab.reshape(2, n // 2, n_src),
+                          p_sat.reshape(2, n // 2, n_src), p_const.reshape(2, n // 2, n_const),
+                          p_thresh) == 3
+    assert required_order(valid, lab, p_sat, p_const, p_thresh, cap=2) == 2
+
+
 def test_root_finder_q_and_density_match_scipy():
     """The root finder's (Q, phi) pair against SciPy: Q to 1e-14 relative wherever
     Q > 1e-29 (its docstring claims 1e-15 against erfc; SciPy's ndtr adds its own rounding),
