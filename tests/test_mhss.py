@@ -899,6 +899,16 @@ def test_threaded_split_is_bit_identical_to_one_call():
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(one.hpl_m), rtol=1e-12)
     with pytest.raises(ValueError, match="threads"):
         araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
+    # the public call: split over 2 threads with the kernel's input flags, same bits; a bad
+    # value at a valid source of the second part is caught there and named by the host check
+    public = araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=2)
+    for name, a, b in zip(public._fields, public, one, strict=True):
+        assert np.array_equal(np.asarray(a), np.asarray(b)), name
+    bad = np.array(args[3])
+    bad[6 * CHUNK + 3, 2] = -1.0
+    with pytest.raises(ValueError, match="var_acc_m2"):
+        araim.protection_levels(*args[:3], bad, *args[4:7], budget, args[7], max_order=1,
+                                threads=2)
 
 
 def test_kernel_compiler_options_change_no_bit():
