@@ -933,7 +933,7 @@ def _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, vali
     """(B,) int8, nonzero where a valid source of the geometry fails a range check of
     ``_check_inputs`` (bit k: the k-th of ``_INPUT_RANGES``, then the constellation label).
     Batch-first (B, L) inputs, evaluated batch-last with the ORs over sources written out
-    (vectorised over the batch, as ``_sum``)."""
+    (``_max`` on booleans, vectorised over the batch)."""
     C = p_const.shape[-1]
     valid = to_batch_last(valid, 1)
     tests = [_in_range(to_batch_last(x, 1), lo, lo_ok, hi) for x, (lo, lo_ok, hi) in zip(
@@ -942,10 +942,7 @@ def _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, vali
     tests.append((lab >= 0) & (lab < C))
     flags = jnp.zeros(valid.shape[1:], jnp.int8)
     for bit, ok in enumerate(tests):
-        bad = valid & ~ok  # (L, B)
-        any_bad = bad[0]
-        for m in range(1, bad.shape[0]):
-            any_bad = any_bad | bad[m]
+        any_bad = _max(valid & ~ok, 0)  # OR over the sources of (L, B)
         flags = flags | jnp.where(any_bad, jnp.int8(1 << bit), jnp.int8(0))
     return flags
 

@@ -97,11 +97,6 @@ SLOPE_CHUNK = 16384
 
 
 @jax.jit
-def _slopes_jit(g, sigma_m, valid):
-    return Slopes(*_slopes_kernel(g, sigma_m, valid))
-
-
-@jax.jit
 def _slopes_chunked(g, sigma_m, valid):
     return map_chunks(lambda *xs: Slopes(*_slopes_kernel(*xs)), (g, sigma_m, valid),
                       g.shape[:-2], chunk=SLOPE_CHUNK)

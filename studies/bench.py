@@ -70,7 +70,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
         hpl_ref = np.array(run_ref())
         t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
         hpl_jax = np.asarray(_slope_hpl_chunked(g[:ref_geometries], sigma[:ref_geometries],
-                                            valid[:ref_geometries], table).hpl_m)
+                                                valid[:ref_geometries], table).hpl_m)
         out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
                    reference_s=t_ref,
                    reference_hpl_per_s=ref_geometries / t_ref,
