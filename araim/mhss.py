@@ -25,9 +25,10 @@ constellation has no source left in a mode is dropped by putting 1 on its (other
 diagonal: the position block is unchanged.
 
 Each PL equation is solved in log space (``solve_pl``): two Halley steps from the largest
-single-term root, then one evaluation proves that the returned (conservative, upper) PL lies
-within ``FAST_PROOF_TOL_M`` above the root (R(PL) <= rhs, and a lower bound of the slope below
-PL gives R(PL - tol) >= rhs). What that does not prove takes a few Newton rounds and then, in a
+single-term root, the second from exact values and a bound of the third derivative, which
+prove by Taylor's theorem that the returned (conservative, upper) PL lies within
+``FAST_PROOF_TOL_M`` above the root (R(PL) <= rhs and R(PL - tol) >= rhs). What that does not
+prove takes a few probes (one exact evaluation each) and Newton steps and then, in a
 branch run only where needed, safeguarded Newton steps inside a bracket [lo, hi] that is valid
 by construction (lo: below the largest PL at which one term alone reaches the budget; hi: every
 term at most its share of the budget; both from bounds of Q^-1), proved within
@@ -106,6 +107,12 @@ def _q_and_density(t):
     jax.scipy.special.erfc on CPU; agrees with it to 1e-15 relative wherever Q(t) > 1e-29);
     phi(t) = exp(-t^2/2) / sqrt(2 pi), the standard normal density, shares erfc's exponential,
     so the derivative of a PL equation costs one multiply per term."""
+    return _q_density_square(t)[:2]
+
+
+def _q_density_square(t):
+    """(Q(t), phi(t), z) of ``_q_and_density`` and z = min(|t| / sqrt 2, 27)^2, which is t^2 / 2
+    for |t| < 38.18 (where phi(t) > 0 in float64)."""
     x = jnp.minimum(jnp.abs(t) * _SQRT1_2, 27.0)  # erfc(27) underflows to 0
     small = x < 1.0
     z = x * x
@@ -117,7 +124,7 @@ def _q_and_density(t):
     # with two users out of the consumer's fusion (one small loop per term, measured 3x slower)
     q = jnp.where(neg, 1.0, 0.0) + jnp.where(neg, -0.5, 0.5) * num / jnp.where(
         small, u, _poly(_ERFC_Q, x))
-    return q, e * _INV_SQRT_2PI
+    return q, e * _INV_SQRT_2PI, z
 
 
 def _q_and_density_fast(t):
@@ -639,6 +646,40 @@ def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw, unroll_terms=UNROLL_TERM
             jnp.sum(cw * phi * jnp.clip(1.0 + e * (t - 0.5 * e), 0.0, 1.0), axis=0))
 
 
+def _risk_taylor(x, coef, mean, inv_sd, cw, cw2, cw3):
+    """(R, D, D2, B3) at x with the exact Q: R, D = -R' and D2 = R'' as ``_risk_curvature``,
+    and B3 with |R'''| <= ``TAYLOR_B3_FACTOR`` B3 on [x - h, x + h] wherever h max_j(1 / sd_j)
+    <= ``TAYLOR_E_MAX`` (terms with coef_j > 0), which ``solve_pl``'s proof checks.
+
+    R''' = sum_j coef_j (1 - t_j^2) phi(t_j) / sd_j^3; a point s of the interval lies within
+    e = h / sd_j <= 0.01 of t_j, so |1 - s^2| <= 1 + (|t_j| + e)^2 <= 2 + 1.01 t_j^2 and
+    phi(s) <= phi(t_j) exp(|t_j| e) <= 1.5 phi(t_j) for |t_j| <= 38 (|t_j| e <= 0.38). B3 =
+    sum_j cw3_j phi(t_j) (2 + 2.02 z_j) (z_j = t_j^2 / 2, ``_q_density_square``) plus 1e-290
+    sum_j cw3_j, which covers the terms whose phi underflows or whose z is clamped (|t_j| >
+    37.5: there |1 - s^2| phi(s) < 1e-303)."""
+    if coef.shape[0] <= UNROLL_TERMS:
+        r = d = d2 = b3 = 0.0
+        for j in range(coef.shape[0]):
+            t = (x - mean[j]) * inv_sd[j]
+            q, phi, z = _q_density_square(t)
+            r = r + coef[j] * q
+            d = d + cw[j] * phi
+            d2 = d2 + cw2[j] * (t * phi)
+            b3 = b3 + cw3[j] * (phi * (2.0 + 2.02 * z) + 1e-290)
+        return r, d, d2, b3
+    t = (x[None] - mean) * inv_sd
+    q, phi, z = _q_density_square(t)
+    return (jnp.sum(coef * q, axis=0), jnp.sum(cw * phi, axis=0),
+            jnp.sum(cw2 * t * phi, axis=0),
+            jnp.sum(cw3 * (phi * (2.0 + 0.3 * z) + 1e-290), axis=0))
+
+
+#: ``_risk_taylor``'s bound holds for steps h with h / sd_j at most this (every term with
+#: coef_j > 0), and with the factor below (>= exp(38 TAYLOR_E_MAX) = 1.46)
+TAYLOR_E_MAX = 0.01
+TAYLOR_B3_FACTOR = 1.5
+
+
 def _halley_step(x, r, d, d2, z_rhs):
     """One Halley step on h(x) = z(rhs) - z(R(x)), z(S) = sqrt(-2 ln S), from R, D = -R' and
     D2 = R'' at x: with g = -h' = D / (R z) and h'' = D2 / (R z) - D^2 (1 - 1 / z^2) / (R^2 z),
@@ -652,15 +693,15 @@ def _halley_step(x, r, d, d2, z_rhs):
     return x + n / jnp.maximum(1.0 - n * hpp / (2.0 * g), 0.5)
 
 
-#: Halley steps of the fast path of ``solve_pl`` (from the start, one evaluation each). Measured
-#: on 3000 PL equations of the 9 GPS + 4 SOP bench case: the error after one step is up to
-#: 9.1e-4 m (below the root in 21 % of them), after two up to 3e-11 m
-FAST_HALLEY_STEPS = 2
-#: then at most this many Newton steps from the probe point for the elements its proof does not
-#: cover, each with its own probe (measured on the 2000 random geometries of tests/test_mhss.py,
-#: of 5943 PL equations: 296 not proved after the Halley steps, 50 / 12 / 8 / 3 after 1-4 more
-#: steps); the rest goes to the bracketed solver
-FAST_EXTRA_ROUNDS = 4
+#: Measured on 3000 PL equations of the 9 GPS + 4 SOP bench case: the error after the first
+#: Halley step (approximate Q) is up to 9.1e-4 m (below the root in 21 % of them), after the
+#: second (exact Q) up to 3e-11 m
+#: ...then at most this many probes for the elements the Taylor proof does not cover, the
+#: first at the second Halley step's point, each later one a Newton step from the last probe
+#: (measured on the 2000 random geometries of tests/test_mhss.py, of 5943 PL equations: 296
+#: not proved after the Halley steps, 50 / 12 / 8 / 3 after 1-4 more steps); the rest goes to
+#: the bracketed solver
+FAST_EXTRA_ROUNDS = 5
 #: the fast path proves its PLs within this of the root (tighter than ``PL_TOLERANCE_M``, which
 #: the bracketed solver proves): after its Halley steps the bench case is within 3e-11 m, and
 #: an element proved only to 1e-3 m would carry up to 1e-3 m of needless margin
@@ -673,61 +714,68 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     Same contract as ``_solve_pl_bracketed``: returns (pl, converged), pl never below the root
     and within ``PL_TOLERANCE_M`` of it where converged.
 
-    Fast path: ``FAST_HALLEY_STEPS`` Halley steps (z space, ``_halley_step``) from the start of
-    ``_solve_pl_bracketed``, then pl = x + ``PL_MARGIN_M`` and one evaluation that proves both
-    sides at once, with tol = ``FAST_PROOF_TOL_M``:
-      R(pl) <= rhs, so pl is at or above the root, and
-      R(pl) + tol Dl(pl) >= rhs, with Dl a lower bound of the slope on [pl - tol, pl] from the
-      values at pl (``_risk_lower_slope``), so R(pl - tol) >= rhs: pl - tol is at or below it.
-    Elements the proof does not cover take up to ``FAST_EXTRA_ROUNDS`` Newton steps from their
-    probe point, each with its own probe (a loop that ends at once when every element is
-    proved). What is still not proved is solved by the bracketed solver, in a branch taken only
-    when a chunk has such an element (``jax.lax.cond``). Each element's result depends on its
-    own terms only, never on the rest of the batch.
+    Fast path, two evaluations of the terms: a Halley step (z space, ``_halley_step``) from the
+    start of ``_solve_pl_bracketed`` with the approximate Q of ``_risk_curvature`` to x1; at
+    x1 the exact R, R', R'' and a bound of |R'''| near x1 (``_risk_taylor``), and a second
+    Halley step to x2. pl = x2 + ``PL_MARGIN_M`` is proved from x1 by Taylor's theorem with
+    tol = ``FAST_PROOF_TOL_M``, for h = pl - x1 and pl - tol - x1:
+      R(x1 + h) <= R - D h + D2 h^2 / 2 + |R'''|max |h|^3 / 6 <= rhs at pl (at or above the
+      root), and R(x1 + h) >= ... - |R'''|max |h|^3 / 6 >= rhs at pl - tol (at or below it).
+    (the third-order term is ~1e-8 of R for the bench's |h| ~ 1e-3 m; the proof needs ~1e-6.)
+    Elements that proof does not cover take up to ``FAST_EXTRA_ROUNDS`` probes, each an exact
+    evaluation at its point that proves both sides at once (R(pl) <= rhs, and R(pl) + tol
+    Dl(pl) >= rhs with Dl a lower bound of the slope on [pl - tol, pl], ``_risk_lower_slope``),
+    the first at x2, the next ones a Newton step from the last probe (a loop that ends at once
+    when every element is proved). What is still not proved is solved by the bracketed solver,
+    in a branch taken only when a chunk has such an element (``jax.lax.cond``). Each element's
+    result depends on its own terms only, never on the rest of the batch.
 
     ``start``: the starting point, max_j mean_j + sd_j ``_fast_start_factor``_j (about the
     largest single-term root), when the caller has it. ``ignore``: elements whose result the
-    caller discards (they never trigger the bracketed branch). Measured on the 9 GPS + 4 SOP
-    bench case: every element proved after the Halley steps, 3 evaluations instead of 4 plus
-    the loop's bookkeeping, the kernel 14-16 % faster.
+    caller discards (they never trigger the loop or the bracketed branch). Measured on the 9
+    GPS + 4 SOP bench case: every element proved by the Taylor step; stop 16's three
+    evaluations (two Halley steps, then a probe) took 4-5 % more of the whole kernel.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
     if start is None:
         k = _fast_start_factor(coef, rhs)
         start = jnp.max(jnp.where(k > -jnp.inf, mean + sd * k, -jnp.inf), axis=0)
-    x = start
     inv_sd = 1.0 / sd
     cw = linalg.materialize(coef * inv_sd)
     cw2 = linalg.materialize(cw * inv_sd)
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
-    for _ in range(FAST_HALLEY_STEPS):
-        x = _halley_step(x, *_risk_curvature(x, coef, mean, inv_sd, cw, cw2), z_rhs)
+    x1 = _halley_step(start, *_risk_curvature(start, coef, mean, inv_sd, cw, cw2), z_rhs)
+    r, d, d2, b3 = _risk_taylor(x1, coef, mean, inv_sd, cw, cw2, cw2 * inv_sd)
     tol = FAST_PROOF_TOL_M
-
-    def probe(x, unroll_terms=UNROLL_TERMS):
-        pl = x + PL_MARGIN_M
-        r, dl = _risk_lower_slope(pl, tol, coef, mean, inv_sd, cw, unroll_terms)
-        return pl, r, dl, (r <= rhs) & (r + tol * dl >= rhs)
-
-    pl, r, d, proved = probe(x)
+    x2 = _halley_step(x1, r, d, d2, z_rhs)
+    hp = x2 + PL_MARGIN_M - x1
+    hm = hp - tol
+    h = jnp.maximum(jnp.abs(hp), jnp.abs(hm))
+    rem = (TAYLOR_B3_FACTOR / 6.0) * b3 * h**3
+    inv_sd_max = _max(jnp.where(coef > 0, inv_sd, 0.0), 0)
+    proved = ((h * inv_sd_max <= TAYLOR_E_MAX) & (r - d * hp + 0.5 * d2 * hp * hp + rem <= rhs)
+              & (r - d * hm + 0.5 * d2 * hm * hm - rem >= rhs))
+    pl = x2 + PL_MARGIN_M
     settled = proved if ignore is None else proved | ignore
 
     def more(carry):
         return (carry[0] < FAST_EXTRA_ROUNDS) & ~jnp.all(carry[-1])
 
-    def newton_from_probe(carry):
-        """A Newton step (z space) from the last probe point, and its probe, for the elements
-        not yet proved; the others keep their values. The slope is the probe's Dl (= D where
-        every term is convex near the probe; smaller, so a longer step, elsewhere)."""
-        i, pl, r, d, proved, settled = carry
+    def probe_and_step(carry):
+        """Probe the candidate point of the elements not yet proved, and propose a Newton step
+        (z space) from there; the others keep their values. The slope is the probe's Dl (= D
+        where every term is convex near the probe; smaller, so a longer step, elsewhere)."""
+        i, x, pl, proved, settled = carry
+        pl2 = x + PL_MARGIN_M
+        r, dl = _risk_lower_slope(pl2, tol, coef, mean, inv_sd, cw, RARE_UNROLL_TERMS)
+        proved2 = (r <= rhs) & (r + tol * dl >= rhs)
         z = jnp.sqrt(jnp.maximum(-2.0 * jnp.log(r), 0.0))
-        pl2, r2, d2, proved2 = probe(pl + (z_rhs - z) * r * z / d, RARE_UNROLL_TERMS)
         keep = lambda old, new: jnp.where(settled, old, new)  # noqa: E731
-        return (i + 1, keep(pl, pl2), keep(r, r2), keep(d, d2), keep(proved, proved2),
-                settled | proved2)
+        return (i + 1, keep(x, pl2 + (z_rhs - z) * r * z / dl), keep(pl, pl2),
+                keep(proved, proved2), settled | proved2)
 
-    _, pl, _, _, proved, settled = jax.lax.while_loop(more, newton_from_probe, (
-        jnp.int32(0), pl, r, d, proved, settled))
+    _, _, pl, proved, settled = jax.lax.while_loop(more, probe_and_step, (
+        jnp.int32(0), x2, pl, proved, settled))
 
     def bracketed(_):
         pl_b, converged_b = _solve_pl_bracketed(coef, mean, sd, rhs, iterations,

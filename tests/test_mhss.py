@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy import optimize, special
+from scipy import optimize, special, stats
 
 import araim
 import geometry
@@ -814,6 +814,36 @@ def test_halley_step_one_term_closed_form():
     assert 0.3 < ratio < 3, ratio
 
 
+def test_taylor_third_derivative_bound_holds():
+    """``solve_pl``'s Taylor proof: |R'''(s)| <= ``TAYLOR_B3_FACTOR`` B3(x) at every s within h
+    of x where h max_j (1 / sd_j) <= ``TAYLOR_E_MAX`` (``_risk_taylor``), R''' in closed form
+    (sum_j coef_j (1 - t^2) phi(t) / sd_j^3) at 41 points of the interval, for terms with t from
+    -45 to 45 (phi underflowing at either end); and its R, D, D2 are ``_risk_curvature``'s to
+    1e-8 (that one's approximate Q) and D, D2 exactly."""
+    from araim.mhss import TAYLOR_B3_FACTOR, TAYLOR_E_MAX, _risk_curvature, _risk_taylor
+
+    coef, mean, sd, rhs = _random_pl_terms(5, n=3000, terms=12)
+    rng = np.random.default_rng(6)
+    x = mean[0] + sd[0] * rng.uniform(-45.0, 45.0, rhs.size)
+    mean = np.where(rng.random(mean.shape) < 0.5, x - sd * rng.uniform(-45, 45, mean.shape), mean)
+    inv_sd = 1.0 / sd
+    cw = coef * inv_sd
+    r, d, d2, b3 = (np.asarray(a) for a in jax.jit(_risk_taylor)(
+        x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))
+    r_, d_, d2_ = (np.asarray(a) for a in jax.jit(_risk_curvature)(
+        x, coef, mean, inv_sd, cw, cw * inv_sd))
+    np.testing.assert_allclose(r, r_, rtol=1e-8, atol=1e-300)
+    np.testing.assert_allclose(d, d_, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(d2, d2_, rtol=1e-14, atol=0)
+    h = TAYLOR_E_MAX / np.max(np.where(coef > 0, inv_sd, 0.0), axis=0)
+    for f in np.linspace(-1.0, 1.0, 41):
+        t = (x + f * h - mean) * inv_sd
+        third = np.sum(coef * (1 - t**2) * stats.norm.pdf(t) * inv_sd**3, axis=0)
+        assert np.all(np.abs(third) <= TAYLOR_B3_FACTOR * b3), f
+    # the tails are exercised: a tenth of the terms where phi(t) underflows (B3's floor term)
+    assert np.mean(np.abs((x - mean) * inv_sd) > 38.5) > 0.1
+
+
 def test_risk_sums_unrolled_and_vectorised_agree():
     """The two forms of the risk sums (terms written out, for the fast path; one array over the
     terms, for the rarely run parts of ``solve_pl``, cheaper to compile) give the same R, D and
@@ -835,8 +865,8 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     """``solve_pl`` on 4000 hard random PL equations (24 terms, priors from 1/10 of the budget
     to 0.1, means up to 60 m, sd 0.3-100 m): every PL is at or above the exact root (SciPy
     brentq) and within 1e-3 m of it, within 1e-4 m where the fast path proved it. Counted with
-    the bracketed branch replaced by NaN: the Halley steps alone prove 97.7 %, one Newton round
-    99.5 %, the default rounds all. With one round allowed, the bracketed branch runs for the
+    the bracketed branch replaced by NaN: the Taylor proof of the two Halley steps alone proves
+    90.6 %, with the first probe 97.7 %, then 99.6 %, 99.9 %, and the default rounds all. With one round allowed, the bracketed branch runs for the
     rest and still brackets the root; the bracketed solver alone agrees within 1e-3 m."""
     from araim import mhss
 
