@@ -866,8 +866,9 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     to 0.1, means up to 60 m, sd 0.3-100 m): every PL is at or above the exact root (SciPy
     brentq) and within 1e-3 m of it, within 1e-4 m where the fast path proved it. Counted with
     the bracketed branch replaced by NaN: the Taylor proof of the two Halley steps alone proves
-    90.6 %, with the first probe 97.7 %, then 99.6 %, 99.9 %, and the default rounds all. With one round allowed, the bracketed branch runs for the
-    rest and still brackets the root; the bracketed solver alone agrees within 1e-3 m."""
+    90.6 %, with the first probe 97.7 %, then 99.6 %, 99.9 %, and the default rounds all.
+    With one round allowed, the bracketed branch runs for the rest and still brackets the
+    root; the bracketed solver alone agrees within 1e-3 m."""
     from araim import mhss
 
     coef, mean, sd, rhs = _random_pl_terms(11)
@@ -893,7 +894,7 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     proved = [solve(rounds, bracketed=False)[1] for rounds in (0, 1, mhss.FAST_EXTRA_ROUNDS)]
     assert proved[0].sum() < proved[1].sum() < rhs.size == proved[2].sum()
     assert np.all(pl - root <= mhss.FAST_PROOF_TOL_M)
-    check(*solve(rounds=1))  # the bracketed branch runs for the 0.5 % left
+    check(*solve(rounds=1))  # the bracketed branch runs for the 2.3 % left
     pl_b, converged_b = (np.asarray(a) for a in jax.jit(mhss._solve_pl_bracketed)(
         coef, mean, sd, rhs))
     assert converged_b.all() and np.all(np.abs(pl_b - pl) <= mhss.PL_TOLERANCE_M)
