@@ -5,8 +5,13 @@ is ~100 MB and the kernel becomes memory-bound (measured: 23k PL/s unchunked, 80
 chunks of 1024, 9 GPS + 4 SOPs, 2 cores). ``lax.map`` over fixed-size chunks keeps every
 intermediate small: after the Newton root finder (2026-11-25, otherwise idle machine, best of 5
 per setting, two passes) chunks of 64 / 128 / 256 / 1024 / 4096 gave 118k / 146-188k /
-154-159k / 129-133k / 132k PL/s; 256 is the steadiest (its (modes x sources) arrays stay in
-L2). Batches larger than one chunk are computed in chunks of exactly this shape, so there a
+154-159k / 129-133k / 132k PL/s; 256 was the steadiest then. Since the kernel got ~5x faster
+its chunk traffic matters more: 2026-12-02 (stop 17), 2 host threads, interleaved in one
+process, median of 9 rounds: 829k PL/s at 128 against 787k at 256 for the bench case (9 GPS +
+4 SOPs, order 1), 157k against 147k for 8 SOPs at P_s^S = 1e-2 (order 2, Fig. 4's heaviest
+cells); 64 equals 128 (766k / 768k), 512 and above are slower (one core: 2.25 / 2.55 / 2.73
+CPU-us per PL at 256 / 512 / 1024). A (modes x 3 x sources) array of the bench case is 0.6 MB
+per chunk of 128, a third of a core's 2 MB L2. Batches larger than one chunk are computed in chunks of exactly this shape, so there a
 geometry's result does not depend on the caller's batch size (XLA rounds differently at
 different shapes); a batch of at most one chunk runs at its own shape. Every geometry is
 computed independently and the padding geometries are dropped, so changing ``CHUNK`` moves
@@ -59,7 +64,7 @@ def jit_kernel(fn=None, **kwargs):
     return call
 
 #: geometries per chunk
-CHUNK = 256
+CHUNK = 128
 
 
 def _flatten(arrays, batch_shape):
