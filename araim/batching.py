@@ -11,11 +11,11 @@ process, median of 9 rounds: 829k PL/s at 128 against 787k at 256 for the bench 
 4 SOPs, order 1), 157k against 147k for 8 SOPs at P_s^S = 1e-2 (order 2, Fig. 4's heaviest
 cells); 64 equals 128 (766k / 768k), 512 and above are slower (one core: 2.25 / 2.55 / 2.73
 CPU-us per PL at 256 / 512 / 1024). A (modes x 3 x sources) array of the bench case is 0.6 MB
-per chunk of 128, a third of a core's 2 MB L2. Batches larger than one chunk are computed in chunks of exactly this shape, so there a
-geometry's result does not depend on the caller's batch size (XLA rounds differently at
-different shapes); a batch of at most one chunk runs at its own shape. Every geometry is
-computed independently and the padding geometries are dropped, so changing ``CHUNK`` moves
-results only by rounding (last bits), never by more.
+per chunk of 128, a third of a core's 2 MB L2. Batches larger than one chunk are computed in
+chunks of exactly this shape, so there a geometry's result does not depend on the caller's
+batch size (XLA rounds differently at different shapes); a batch of at most one chunk runs at
+its own shape. Every geometry is computed independently and the padding geometries are
+dropped, so changing ``CHUNK`` moves results only by rounding (last bits), never by more.
 """
 
 import concurrent.futures

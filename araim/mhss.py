@@ -373,10 +373,11 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
 
 
 def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
-             max_order, all_in_view_weighting, single_downdates=True):
+             max_order, all_in_view_weighting, single_downdates=True, input_flags=False):
     """Batch-last: g (L, 3, B); constellation, var_*, b_nom, p_sat, valid (L, B); p_const
     (C, B). ``single_downdates`` computes the L single-source modes by rank-one downdates of
-    the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky."""
+    the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky.
+    ``input_flags``: returns (Projection, ``_input_flags``) instead."""
     C = p_const.shape[0]
     L = valid.shape[0]
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
@@ -384,6 +385,9 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
         linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat,
                                         p_const, valid))
+    # from the stored batch-last inputs (measured, bench case, 2 threads: the flags from the
+    # caller's batch-first arrays cost 4 % of the kernel)
+    flags = _input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
     g = linalg.materialize(jnp.where(valid[:, None, :], g, 0.0))
@@ -448,8 +452,9 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
             nonsingular = nonsingular.at[0].set(ok0[0])
             sigma_ss = jnp.sqrt(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None], axis=2))
             sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
-    return _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
-                   budget, g.dtype)
+    pr = _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
+                 budget, g.dtype)
+    return (pr, flags) if input_flags else pr
 
 
 def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc, budget,
@@ -928,17 +933,22 @@ def _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
 
 
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
-                            budget, max_order, all_in_view_weighting, iterations):
-    """One flat batch (B, ...) in and out; batch-last inside."""
+                            budget, max_order, all_in_view_weighting, iterations,
+                            input_flags=False):
+    """One flat batch (B, ...) in and out; batch-last inside. ``input_flags``: returns
+    (MHSSResult, ``_input_flags``)."""
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    pr = _project(*args, budget, max_order, all_in_view_weighting)
+    pr = _project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags)
+    if input_flags:
+        pr, flags = pr
     pl, status, emt = _pls_from_projection(pr, budget, iterations)
     ok = status == Status.OK
     out = MHSSResult(
         hpl_m=jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), vpl_m=pl[2], emt_m=emt,
         sigma_acc_u_m=jnp.where(ok, pr.sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
         p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl)
-    return MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+    out = MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+    return (out, flags) if input_flags else out
 
 
 def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
@@ -954,9 +964,8 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
         (p_sat, (L,)), (p_const, (C,)), (valid, (L,)))]
 
     def kernel(*xs):
-        out = _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
-                                      iterations)
-        return (out, _input_flags(*xs)) if input_flags else out
+        return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
+                                       iterations, input_flags)
 
     return map_chunks(kernel, arrays, batch)
 
@@ -977,17 +986,14 @@ _protection_levels_part_jit = jit_kernel(_protection_levels_part,
                                          static_argnames=("size",) + _STATIC)
 
 
-def _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid):
+def _input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C):
     """(B,) int8, nonzero where a valid source of the geometry fails a range check of
     ``_check_inputs`` (bit k: the k-th of ``_INPUT_RANGES``, then the constellation label).
-    Batch-first (B, L) inputs, evaluated batch-last with the ORs over sources written out
-    (``_max`` on booleans, vectorised over the batch)."""
-    C = p_const.shape[-1]
-    valid = to_batch_last(valid, 1)
-    tests = [_in_range(to_batch_last(x, 1), lo, lo_ok, hi) for x, (lo, lo_ok, hi) in zip(
+    Batch-last (L, B) inputs (``_project``'s), C constellation slots; the ORs over sources
+    written out (``_max`` on booleans, vectorised over the batch)."""
+    tests = [_in_range(x, lo, lo_ok, hi) for x, (lo, lo_ok, hi) in zip(
         (var_int, var_acc, b_nom, p_sat), _INPUT_RANGES.values(), strict=True)]
-    lab = to_batch_last(constellation, 1)
-    tests.append((lab >= 0) & (lab < C))
+    tests.append((constellation >= 0) & (constellation < C))
     flags = jnp.zeros(valid.shape[1:], jnp.int8)
     for bit, ok in enumerate(tests):
         any_bad = _max(valid & ~ok, 0)  # OR over the sources of (L, B)
