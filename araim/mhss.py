@@ -178,6 +178,19 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
+# Stores dropped in stop 17 (2026-12-02): where an intermediate is not stored with
+# ``linalg.materialize`` although an earlier stop stored it. Every remaining store site of the
+# bench kernel was measured dropped alone (one core, CPU time, interleaved), then together.
+# Seven stores cost more than they saved once the root finder evaluates its terms twice
+# instead of three times: cw and cw2 of ``solve_pl``, the start factors of
+# ``_pls_from_projection``, 1 / s_c of ``_centered_rows``, the inverse entries of
+# ``_whole_modes``, the single modes' outputs and the masked rows g of ``_project``. Without
+# them, outputs bit-identical: one core 1.84 -> 1.69 CPU-us per PL (cw/cw2 alone: 2.01 ->
+# 1.83), 2 threads 848k -> 929k PL/s (cw/cw2), then 884k -> 922k (the other five); 8 SOPs at
+# order 2 +1.4 %. Dropping also the stores of the centred rows, s_pos, whole-mode bias and
+# sigma_ss, w_int and member made it slower (one core 2.06 against 1.84).
+
+
 def _blocks(parts):
     """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
     concatenation with the computations of its parts into one loop that branches on every
@@ -270,7 +283,8 @@ def _centered_rows(g, w_int, member):
     for c in range(member.shape[1]):
         wc = w_int * memf[:, c]
         s_c = _sum(wc, 0)
-        inv = linalg.materialize(jnp.where(s_c > 0, 1.0 / jnp.where(s_c > 0, s_c, 1.0), 0.0))
+        # (not stored: stop 17, note above ``_blocks``)
+        inv = jnp.where(s_c > 0, 1.0 / jnp.where(s_c > 0, s_c, 1.0), 0.0)
         for a in range(3):
             mean = linalg.materialize(_sum(wc * g[:, a], 0) * inv)
             gt[a] = gt[a] - memf[:, c] * mean[None]
@@ -298,8 +312,8 @@ def _whole_modes(keep, w_int, gt, b_nom, var_acc):
             n[i][j] = n[j][i] = linalg.materialize(_sum(wg[i] * gt[j][None], 1))
     lower, ok = linalg.cholesky(n, scale=_sum(w, 1))
     zero = jnp.zeros_like(n[0][0])
-    inv = [[linalg.materialize(e) for e in linalg.cholesky_solve(
-        lower, [zero + (1.0 if j == q else 0.0) for j in range(3)])] for q in range(3)]
+    inv = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0) for j in range(3)])
+           for q in range(3)]  # (not stored: stop 17, note above ``_blocks``)
     # S_q,l = sum_a inv_qa w_l g~_l,a from the inverse's columns as (M, 3, B) arrays (zero
     # where singular), by broadcasting: a stack over q of the (M, L, B) rows, fused into the
     # sums below, ran one branchy loop per element (measured 8 % of the kernel slower)
@@ -366,9 +380,7 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     for m in range(L):
         spread = spread + c[:, m] ** 2 * var_acc[m]
     sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
-    # stored before they are concatenated with the other modes (a concatenation fused with
-    # the sums above ran one scalar loop per output element)
-    var_pos, bias, sigma_ss = (linalg.materialize(x) for x in (var_pos, bias, sigma_ss))
+    # (not stored before ``_blocks`` writes them into the mode arrays: stop 17, note above it)
     return s_pos, var_pos, bias, sigma_ss, ok
 
 
@@ -390,7 +402,7 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     flags = _input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
-    g = linalg.materialize(jnp.where(valid[:, None, :], g, 0.0))
+    g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: stop 17, note above ``_blocks``)
     w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
     var_acc = linalg.materialize(jnp.where(valid, var_acc, 0.0))
@@ -746,8 +758,8 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
         k = _fast_start_factor(coef, rhs)
         start = jnp.max(jnp.where(k > -jnp.inf, mean + sd * k, -jnp.inf), axis=0)
     inv_sd = 1.0 / sd
-    cw = linalg.materialize(coef * inv_sd)
-    cw2 = linalg.materialize(cw * inv_sd)
+    cw = coef * inv_sd  # (not stored: stop 17, note above ``_blocks``)
+    cw2 = cw * inv_sd
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
     x1 = _halley_step(start, *_risk_curvature(start, coef, mean, inv_sd, cw, cw2), z_rhs)
     r, d, d2, b3 = _risk_taylor(x1, coef, mean, inv_sd, cw, cw2, cw2 * inv_sd)
@@ -910,7 +922,7 @@ def _pls_from_projection(pr, budget, iterations):
     # east and north share the right-hand side: the start factor (Q^-1 per term) once for both,
     # ln coef once for all three
     log_coef = jnp.log(jnp.where(coef[:, 0] > 0, coef[:, 0], 1.0))
-    k = [linalg.materialize(_fast_start_factor(coef[:, 0], r, log_coef)) for r in rhs_hv]
+    k = [_fast_start_factor(coef[:, 0], r, log_coef) for r in rhs_hv]  # (not stored: stop 17)
     mean = pr.threshold + pr.bias
     start = jnp.stack([_max(jnp.where(kq > -jnp.inf, mean[:, q] + pr.sigma[:, q] * kq,
                                       -jnp.inf), 0) for q, kq in enumerate((k[0], k[0], k[1]))])
