@@ -710,14 +710,16 @@ def _halley_step(x, r, d, d2, z_rhs):
     return x + n / jnp.maximum(1.0 - n * hpp / (2.0 * g), 0.5)
 
 
-#: Measured on 3000 PL equations of the 9 GPS + 4 SOP bench case: the error after the first
-#: Halley step (approximate Q) is up to 9.1e-4 m (below the root in 21 % of them), after the
-#: second (exact Q) up to 3e-11 m
-#: ...then at most this many probes for the elements the Taylor proof does not cover, the
-#: first at the second Halley step's point, each later one a Newton step from the last probe
-#: (measured on the 2000 random geometries of tests/test_mhss.py, of 5943 PL equations: 296
-#: not proved after the Halley steps, 50 / 12 / 8 / 3 after 1-4 more steps); the rest goes to
-#: the bracketed solver
+#: ``solve_pl``'s fast path: two Halley steps (measured on 3000 PL equations of the 9 GPS + 4
+#: SOP bench case: after the first, with the approximate Q, the error is up to 9.1e-4 m, below
+#: the root in 21 % of them; after the second, from exact values, up to 3e-11 m), proved by
+#: Taylor's theorem; then at most this many probes for the elements that proof does not cover,
+#: the first at the second Halley step's point, each later one a Newton step from the last
+#: probe; the rest goes to the bracketed solver. Measured on the 2000 random geometries of
+#: tests/test_mhss.py (bracketed solver disabled), geometries with a PL not proved after 0..5
+#: probes: order 1 141 / 78 / 2 / 0; order 2 439 / 188 / 39 / 17 / 5 / 2; order 3 516 / 232 /
+#: 65 / 38 / 17 / 11 (stop 16's probe-only path: exactly these shifted by one probe); the bench
+#: case: 1 geometry of 65,536 after the Taylor proof, none after one probe
 FAST_EXTRA_ROUNDS = 5
 #: the fast path proves its PLs within this of the root (tighter than ``PL_TOLERANCE_M``, which
 #: the bracketed solver proves): after its Halley steps the bench case is within 3e-11 m, and
