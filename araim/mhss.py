@@ -663,7 +663,13 @@ def _risk_lower_slope(x, delta, coef, mean, inv_sd, cw, unroll_terms=UNROLL_TERM
             jnp.sum(cw * phi * jnp.clip(1.0 + e * (t - 0.5 * e), 0.0, 1.0), axis=0))
 
 
-def _risk_taylor(x, coef, mean, inv_sd, cw, cw2, cw3):
+def _third_bound_term(phi, z):
+    """phi(t) (2 + 1.01 t^2) + 1e-290 with z = t^2 / 2: one term's share of ``_risk_taylor``'s
+    B3 before its weight cw3_j."""
+    return phi * (2.0 + 2.02 * z) + 1e-290
+
+
+def _risk_taylor(x, coef, mean, inv_sd, cw, cw2, cw3, unroll_terms=UNROLL_TERMS):
     """(R, D, D2, B3) at x with the exact Q: R, D = -R' and D2 = R'' as ``_risk_curvature``,
     and B3 with |R'''| <= ``TAYLOR_B3_FACTOR`` B3 on [x - h, x + h] wherever h max_j(1 / sd_j)
     <= ``TAYLOR_E_MAX`` (terms with coef_j > 0), which ``solve_pl``'s proof checks.
@@ -673,8 +679,8 @@ def _risk_taylor(x, coef, mean, inv_sd, cw, cw2, cw3):
     phi(s) <= phi(t_j) exp(|t_j| e) <= 1.5 phi(t_j) for |t_j| <= 38 (|t_j| e <= 0.38). B3 =
     sum_j cw3_j phi(t_j) (2 + 2.02 z_j) (z_j = t_j^2 / 2, ``_q_density_square``) plus 1e-290
     sum_j cw3_j, which covers the terms whose phi underflows or whose z is clamped (|t_j| >
-    37.5: there |1 - s^2| phi(s) < 1e-303)."""
-    if coef.shape[0] <= UNROLL_TERMS:
+    37.5: there |1 - s^2| phi(s) < 1e-303) (``_third_bound_term``)."""
+    if coef.shape[0] <= unroll_terms:
         r = d = d2 = b3 = 0.0
         for j in range(coef.shape[0]):
             t = (x - mean[j]) * inv_sd[j]
@@ -682,13 +688,12 @@ def _risk_taylor(x, coef, mean, inv_sd, cw, cw2, cw3):
             r = r + coef[j] * q
             d = d + cw[j] * phi
             d2 = d2 + cw2[j] * (t * phi)
-            b3 = b3 + cw3[j] * (phi * (2.0 + 2.02 * z) + 1e-290)
+            b3 = b3 + cw3[j] * _third_bound_term(phi, z)
         return r, d, d2, b3
     t = (x[None] - mean) * inv_sd
     q, phi, z = _q_density_square(t)
     return (jnp.sum(coef * q, axis=0), jnp.sum(cw * phi, axis=0),
-            jnp.sum(cw2 * t * phi, axis=0),
-            jnp.sum(cw3 * (phi * (2.0 + 0.3 * z) + 1e-290), axis=0))
+            jnp.sum(cw2 * t * phi, axis=0), jnp.sum(cw3 * _third_bound_term(phi, z), axis=0))
 
 
 #: ``_risk_taylor``'s bound holds for steps h with h / sd_j at most this (every term with
@@ -767,14 +772,14 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     r, d, d2, b3 = _risk_taylor(x1, coef, mean, inv_sd, cw, cw2, cw2 * inv_sd)
     tol = FAST_PROOF_TOL_M
     x2 = _halley_step(x1, r, d, d2, z_rhs)
-    hp = x2 + PL_MARGIN_M - x1
+    pl = x2 + PL_MARGIN_M
+    hp = pl - x1
     hm = hp - tol
     h = jnp.maximum(jnp.abs(hp), jnp.abs(hm))
     rem = (TAYLOR_B3_FACTOR / 6.0) * b3 * h**3
     inv_sd_max = _max(jnp.where(coef > 0, inv_sd, 0.0), 0)
     proved = ((h * inv_sd_max <= TAYLOR_E_MAX) & (r - d * hp + 0.5 * d2 * hp * hp + rem <= rhs)
               & (r - d * hm + 0.5 * d2 * hm * hm - rem >= rhs))
-    pl = x2 + PL_MARGIN_M
     settled = proved if ignore is None else proved | ignore
 
     def more(carry):

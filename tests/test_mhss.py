@@ -819,7 +819,8 @@ def test_taylor_third_derivative_bound_holds():
     of x where h max_j (1 / sd_j) <= ``TAYLOR_E_MAX`` (``_risk_taylor``), R''' in closed form
     (sum_j coef_j (1 - t^2) phi(t) / sd_j^3) at 41 points of the interval, for terms with t from
     -45 to 45 (phi underflowing at either end); and its R, D, D2 are ``_risk_curvature``'s to
-    1e-8 (that one's approximate Q) and D, D2 exactly."""
+    1e-8 (that one's approximate Q) and D, D2 exactly. The bound for both forms of the sums
+    (terms written out, and one array over the terms, used beyond ``UNROLL_TERMS`` terms)."""
     from araim.mhss import TAYLOR_B3_FACTOR, TAYLOR_E_MAX, _risk_curvature, _risk_taylor
 
     coef, mean, sd, rhs = _random_pl_terms(5, n=3000, terms=12)
@@ -828,33 +829,39 @@ def test_taylor_third_derivative_bound_holds():
     mean = np.where(rng.random(mean.shape) < 0.5, x - sd * rng.uniform(-45, 45, mean.shape), mean)
     inv_sd = 1.0 / sd
     cw = coef * inv_sd
-    r, d, d2, b3 = (np.asarray(a) for a in jax.jit(_risk_taylor)(
-        x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))
     r_, d_, d2_ = (np.asarray(a) for a in jax.jit(_risk_curvature)(
         x, coef, mean, inv_sd, cw, cw * inv_sd))
-    np.testing.assert_allclose(r, r_, rtol=1e-8, atol=1e-300)
-    np.testing.assert_allclose(d, d_, rtol=1e-14, atol=0)
-    np.testing.assert_allclose(d2, d2_, rtol=1e-14, atol=0)
     h = TAYLOR_E_MAX / np.max(np.where(coef > 0, inv_sd, 0.0), axis=0)
-    for f in np.linspace(-1.0, 1.0, 41):
-        t = (x + f * h - mean) * inv_sd
-        third = np.sum(coef * (1 - t**2) * stats.norm.pdf(t) * inv_sd**3, axis=0)
-        assert np.all(np.abs(third) <= TAYLOR_B3_FACTOR * b3), f
+    thirds = [np.sum(coef * (1 - t**2) * stats.norm.pdf(t) * inv_sd**3, axis=0)
+              for t in ((x + f * h - mean) * inv_sd for f in np.linspace(-1.0, 1.0, 41))]
+    for unroll_terms in (64, 0):  # terms written out, and one array over the terms
+        r, d, d2, b3 = (np.asarray(a) for a in jax.jit(
+            lambda *a, u=unroll_terms: _risk_taylor(*a, unroll_terms=u))(
+            x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))
+        if unroll_terms:  # (the other form agrees with this one to rounding: test below)
+            np.testing.assert_allclose(r, r_, rtol=1e-8, atol=1e-300)
+            np.testing.assert_allclose(d, d_, rtol=1e-14, atol=0)
+            np.testing.assert_allclose(d2, d2_, rtol=1e-14, atol=0)
+        for third in thirds:
+            assert np.all(np.abs(third) <= TAYLOR_B3_FACTOR * b3), unroll_terms
     # the tails are exercised: a tenth of the terms where phi(t) underflows (B3's floor term)
     assert np.mean(np.abs((x - mean) * inv_sd) > 38.5) > 0.1
 
 
 def test_risk_sums_unrolled_and_vectorised_agree():
     """The two forms of the risk sums (terms written out, for the fast path; one array over the
-    terms, for the rarely run parts of ``solve_pl``, cheaper to compile) give the same R, D and
-    lower slope to rounding (summation order only)."""
-    from araim.mhss import _risk, _risk_lower_slope
+    terms, for the rarely run parts of ``solve_pl`` and beyond ``UNROLL_TERMS`` terms, cheaper to
+    compile) give the same R, D, lower slope, D2 and third-derivative bound to rounding
+    (summation order only)."""
+    from araim.mhss import _risk, _risk_lower_slope, _risk_taylor
 
     coef, mean, sd, rhs = _random_pl_terms(3)
     x = mean.max(axis=0) + sd.max(axis=0)
     inv_sd = 1.0 / sd
+    cw = coef * inv_sd
     for f, args in ((_risk, (x, coef, mean, inv_sd)),
-                    (_risk_lower_slope, (x, 1e-4, coef, mean, inv_sd, coef * inv_sd))):
+                    (_risk_lower_slope, (x, 1e-4, coef, mean, inv_sd, cw)),
+                    (_risk_taylor, (x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))):
         unrolled = jax.jit(lambda *a, f=f: f(*a, unroll_terms=64))(*args)
         vectorised = jax.jit(lambda *a, f=f: f(*a, unroll_terms=0))(*args)
         for u, v in zip(unrolled, vectorised, strict=True):
