@@ -399,7 +399,8 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
                                         p_const, valid))
     # from the stored batch-last inputs (measured, bench case, 2 threads: the flags from the
     # caller's batch-first arrays cost 4 % of the kernel)
-    flags = _input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
+    flags = (_input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
+             if input_flags else None)
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
     g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: stop 17, note above ``_blocks``)
