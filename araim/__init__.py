@@ -4,18 +4,14 @@ ARAIM / OARAIM multiple-hypothesis solution-separation protection levels with FD
 Pure JAX functions, batch first, float64. Failures are data: ``inf`` with a ``Status``.
 """
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
-from araim import error_models  # noqa: E402
-from araim.budget import BUDGET_LPV200, BUDGET_SEED004_TABLE_I, IntegrityBudget  # noqa: E402
-from araim.chi2 import detection_threshold, lambda_det_table, noncentrality  # noqa: E402
-from araim.fde import FDEResult, Separation, detect_and_exclude, solution_separation  # noqa: E402
-from araim.mhss import MHSSResult, protection_levels  # noqa: E402
-from araim.slopes import SlopeHPL, Slopes, slope_hpl, slopes  # noqa: E402
-from araim.status import Status  # noqa: E402
-from araim.wnls import WNLSResult, wnls  # noqa: E402
+from oaraim.araim import error_models
+from oaraim.araim.budget import BUDGET_LPV200, BUDGET_SEED004_TABLE_I, IntegrityBudget
+from oaraim.araim.chi2 import detection_threshold, lambda_det_table, noncentrality
+from oaraim.araim.fde import FDEResult, Separation, detect_and_exclude, solution_separation
+from oaraim.araim.mhss import MHSSResult, protection_levels
+from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slopes
+from oaraim.araim.status import Status
+from oaraim.araim.wnls import WNLSResult, wnls
 
 __all__ = [
     "BUDGET_LPV200",
@@ -40,9 +36,17 @@ __all__ = [
     "wnls",
 ]
 
-from araim import ekf, ekf_raim  # noqa: E402
-from araim.ekf import EkfParams, EkfState, ekf_init, ekf_predict, ekf_step, ekf_update, run_ekf  # noqa: E402,E501
-from araim.ekf_raim import (  # noqa: E402
+from oaraim.araim import ekf, ekf_raim
+from oaraim.araim.ekf import (
+    EkfParams,
+    EkfState,
+    ekf_init,
+    ekf_predict,
+    ekf_step,
+    ekf_update,
+    run_ekf,
+)
+from oaraim.araim.ekf_raim import (
     DriveSummary,
     RaimConfig,
     drive_setup,
@@ -57,7 +61,7 @@ __all__ += [
     "run_ekf_raim", "simulate_drive",
 ]
 
-from araim import snapshot  # noqa: E402
-from araim.snapshot import MonitorReplay, ReplayResult, replay, replay_metrics  # noqa: E402
+from oaraim.araim import snapshot  # noqa: E402
+from oaraim.araim.snapshot import MonitorReplay, ReplayResult, replay, replay_metrics  # noqa: E402
 
 __all__ += ["MonitorReplay", "ReplayResult", "replay", "replay_metrics", "snapshot"]

@@ -15,7 +15,7 @@ needs the six numbers. Presets:
 
 from dataclasses import asdict, dataclass
 
-from araim.validate import check_probability
+from oaraim.araim.validate import check_probability
 
 
 @dataclass(frozen=True)

@@ -37,11 +37,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from araim import ekf as _ekf
-from araim.chi2 import detection_threshold, noncentrality
-from araim.status import Status
-from geometry import clocks, imu, trajectory
+from oaraim.araim import ekf as _ekf
+from oaraim.araim.chi2 import detection_threshold, noncentrality
+from oaraim.araim.status import Status
+from oaraim.geometry import clocks, imu, trajectory
 
 
 class RaimConfig(NamedTuple):

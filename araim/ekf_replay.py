@@ -50,11 +50,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
-
-from araim import ekf as _ekf
-from araim import ekf_raim as _er
-from geometry import clocks, imu, recording, trajectory
-from geometry import frames as _frames
+from oaraim.araim import ekf as _ekf
+from oaraim.araim import ekf_raim as _er
+from oaraim.geometry import clocks, imu, recording, trajectory
+from oaraim.geometry import frames as _frames
 
 #: tolerance, in IMU steps, for uniform IMU stamps and for epochs lying on IMU stamps
 _STEP_TOL = 0.01

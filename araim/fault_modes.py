@@ -54,8 +54,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from araim import linalg
+from oaraim.araim import linalg
 
 
 class ModeTemplate(NamedTuple):

@@ -19,12 +19,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-
-from araim import linalg
-from araim.batching import jit_kernel
-from araim.budget import IntegrityBudget
-from araim.fault_modes import to_batch_first, to_batch_last
-from araim.mhss import (
+from oaraim.araim import linalg
+from oaraim.araim.batching import jit_kernel
+from oaraim.araim.budget import IntegrityBudget
+from oaraim.araim.fault_modes import to_batch_first, to_batch_last
+from oaraim.araim.mhss import (
     PL_ITERATIONS,
     MHSSResult,
     _batch_last_inputs,
@@ -33,8 +32,8 @@ from araim.mhss import (
     prepare_inputs,
     required_order,
 )
-from araim.status import Status
-from araim.validate import check_int
+from oaraim.araim.status import Status
+from oaraim.araim.validate import check_int
 
 
 class Separation(NamedTuple):

@@ -42,14 +42,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import erfc, ndtri
+from oaraim.araim import linalg
+from oaraim.araim.batching import CHUNK, jit_kernel, map_chunks, map_threads, slice_rows
+from oaraim.araim.budget import IntegrityBudget
+from oaraim.araim.fault_modes import (
+    fault_modes_batch_last,
+    mode_template,
+    to_batch_first,
+    to_batch_last,
+)
+from oaraim.araim.status import Status
+from oaraim.araim.validate import check_int
 from scipy import special
-
-from araim import linalg
-from araim.batching import CHUNK, jit_kernel, map_chunks, map_threads, slice_rows
-from araim.budget import IntegrityBudget
-from araim.fault_modes import fault_modes_batch_last, mode_template, to_batch_first, to_batch_last
-from araim.status import Status
-from araim.validate import check_int
 
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
@@ -1121,7 +1125,7 @@ def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_
 
 def _tails_flat(valid, constellation, p_sat, p_const, r_max):
     """P(more than r constellations faulty), r = 1..r_max, per geometry: (B, r_max)."""
-    from araim.fault_modes import faulty_constellation_tail, group_probabilities
+    from oaraim.araim.fault_modes import faulty_constellation_tail, group_probabilities
 
     gp = group_probabilities(to_batch_last(valid, 1), to_batch_last(constellation, 1),
                              to_batch_last(p_sat, 1), to_batch_last(p_const, 1))

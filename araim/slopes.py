@@ -15,12 +15,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-
-from araim import linalg
-from araim.batching import map_chunks
-from araim.chi2 import lambda_det_table
-from araim.status import Status
-from araim.validate import check_probability, check_sigma
+from oaraim.araim import linalg
+from oaraim.araim.batching import map_chunks
+from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.status import Status
+from oaraim.araim.validate import check_probability, check_sigma
 
 N_STATES = 4  # east, north, up, receiver clock
 

@@ -45,15 +45,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from araim import linalg
-from araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
-from araim.chi2 import detection_threshold, lambda_det_table
-from araim.fde import detect_and_exclude
-from araim.mhss import protection_levels, required_order
-from araim.status import Status
-from araim.validate import check_probability
-from araim.wnls import WNLSResult, wnls
+from oaraim.araim import linalg
+from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
+from oaraim.araim.chi2 import detection_threshold, lambda_det_table
+from oaraim.araim.fde import detect_and_exclude
+from oaraim.araim.mhss import protection_levels, required_order
+from oaraim.araim.status import Status
+from oaraim.araim.validate import check_probability
+from oaraim.araim.wnls import WNLSResult, wnls
 
 #: chi-square slope RAIM defaults (seed 001 is silent; the values of our seed 001 studies)
 DEFAULT_P_FA = 1e-5
@@ -96,7 +95,7 @@ def _enu_axes(x, frame_ecef):
     """(..., 3, 3) ENU rotation at ECEF points x, or the identity in an ENU frame."""
     if not frame_ecef:
         return jnp.broadcast_to(jnp.eye(3), x.shape[:-1] + (3, 3))
-    from geometry.frames import ecef_to_geodetic, enu_rotation
+    from oaraim.geometry.frames import ecef_to_geodetic, enu_rotation
 
     lat, lon, _ = ecef_to_geodetic(x)
     return enu_rotation(lat, lon)
@@ -128,7 +127,7 @@ def group_slopes(g, sigma_m, valid, clock_index, n_clocks):
     With ``n_clocks == 1`` the horizontal slopes are those of ``araim.slopes``. A group without
     a valid source loses its clock column (unit diagonal), as in ``araim.wnls``.
     """
-    from araim.slopes import REDUNDANCY_TOLERANCE, masked_geometry
+    from oaraim.araim.slopes import REDUNDANCY_TOLERANCE, masked_geometry
 
     g, w = masked_geometry(g, sigma_m, valid)
     member = valid[..., :, None] & (clock_index[..., :, None] == jnp.arange(n_clocks))
@@ -172,7 +171,7 @@ def _subset_fits(g, y, sigma, keep, clock_index, n_clocks):
     list, WSSE, nonsingular). One Gauss-Newton step from the converged all-in-view solution:
     removing a source moves the solution by metres, where the range nonlinearity at GNSS
     distances (|dx|^2 / 2 r ~ 1e-6 m) is negligible, so this is the subset's WNLS solution."""
-    from araim.slopes import masked_geometry
+    from oaraim.araim.slopes import masked_geometry
 
     g, w = masked_geometry(g, sigma, keep)
     member = keep[..., :, None] & (clock_index[..., :, None] == jnp.arange(n_clocks))

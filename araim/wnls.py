@@ -13,10 +13,9 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-
-from araim.linalg import inverse_variance_weights
-from araim.status import Status
-from araim.validate import check_sigma
+from oaraim.araim.linalg import inverse_variance_weights
+from oaraim.araim.status import Status
+from oaraim.araim.validate import check_sigma
 
 
 class WNLSResult(NamedTuple):

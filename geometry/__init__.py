@@ -4,20 +4,16 @@ GPS time, broadcast ephemerides, almanacs, nominal constellations and the sky of
 Everything here is a pure JAX function on arrays, batch first, float64.
 """
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
-from geometry import gpstime  # noqa: E402
-from geometry.almanac import Almanac, AlmanacFileError, read_sem, read_yuma  # noqa: E402
-from geometry.ephemeris import (  # noqa: E402
+from oaraim.geometry import gpstime
+from oaraim.geometry.almanac import Almanac, AlmanacFileError, read_sem, read_yuma
+from oaraim.geometry.ephemeris import (
     GALILEO,
     GPS,
     Ephemeris,
     NavigationFileError,
     load_navigation,
 )
-from geometry.frames import (  # noqa: E402
+from oaraim.geometry.frames import (
     azimuth_elevation,
     earth_rotation_correction,
     ecef_to_enu,
@@ -26,11 +22,11 @@ from geometry.frames import (  # noqa: E402
     enu_to_ecef,
     geodetic_to_ecef,
 )
-from geometry.nominal import galileo_walker, gps_24_slot  # noqa: E402
-from geometry.random_sky import Towers, bpp_towers, random_sky  # noqa: E402
-from geometry.rows import geometry_rows, geometry_rows_enu  # noqa: E402
-from geometry.sky import Sky, sky  # noqa: E402
-from geometry.sp3 import PreciseOrbits, SP3Error, read_sp3  # noqa: E402
+from oaraim.geometry.nominal import galileo_walker, gps_24_slot
+from oaraim.geometry.random_sky import Towers, bpp_towers, random_sky
+from oaraim.geometry.rows import geometry_rows, geometry_rows_enu
+from oaraim.geometry.sky import Sky, sky
+from oaraim.geometry.sp3 import PreciseOrbits, SP3Error, read_sp3
 
 __all__ = [
     "GALILEO", "GPS", "Almanac", "AlmanacFileError", "Ephemeris", "NavigationFileError",
@@ -41,8 +37,8 @@ __all__ = [
     "read_yuma", "sky",
 ]
 
-from geometry import recording  # noqa: E402
-from geometry.recording import (  # noqa: E402
+from oaraim.geometry import recording
+from oaraim.geometry.recording import (
     Recording,
     RecordingError,
     example_recording,
@@ -58,9 +54,9 @@ __all__ += [
     "pseudorange_matrix", "recording", "tower_clock_m", "write_recording",
 ]
 
-from geometry import clocks, imu, trajectory  # noqa: E402
-from geometry.imu import ImuSpec, vn100  # noqa: E402
-from geometry.trajectory import (  # noqa: E402
+from oaraim.geometry import clocks, imu, trajectory  # noqa: E402
+from oaraim.geometry.imu import ImuSpec, vn100  # noqa: E402
+from oaraim.geometry.trajectory import (  # noqa: E402
     SCENARIOS,
     Scenario,
     Segment,
@@ -75,8 +71,8 @@ __all__ += [
     "drive_seed002", "imu", "trajectory", "uav_seed004", "vn100",
 ]
 
-from geometry import atmosphere, rinex_obs  # noqa: E402
-from geometry.rinex_obs import ObservationFileError, Observations, read_observations  # noqa: E402
+from oaraim.geometry import atmosphere, rinex_obs  # noqa: E402
+from oaraim.geometry.rinex_obs import ObservationFileError, Observations, read_observations  # noqa: E402
 
 __all__ += ["ObservationFileError", "Observations", "atmosphere", "read_observations",
             "rinex_obs"]

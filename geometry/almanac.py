@@ -22,10 +22,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from geometry import gpstime
-from geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
-from geometry.kepler import (
+from oaraim.geometry import gpstime
+from oaraim.geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
+from oaraim.geometry.kepler import (
     GPS_PI,
     MU_GAL_M3_S2,
     MU_GPS_M3_S2,

@@ -23,8 +23,7 @@ surface meteorology). ``saastamoinen_zhd_m`` (Saastamoinen 1972, in the form of 
 """
 
 import jax.numpy as jnp
-
-from geometry.frames import C_M_S
+from oaraim.geometry.frames import C_M_S
 
 SEMICIRCLE_RAD = jnp.pi
 

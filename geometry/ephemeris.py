@@ -33,9 +33,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from geometry import gpstime
-from geometry.kepler import (
+from oaraim.geometry import gpstime
+from oaraim.geometry.kepler import (
     F_GAL_S_SQRT_M,
     F_GPS_S_SQRT_M,
     MU_GAL_M3_S2,

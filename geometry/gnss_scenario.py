@@ -31,9 +31,8 @@ from typing import NamedTuple
 import jax
 import numpy as np
 import pandas as pd
-
-from geometry import frames, gpstime
-from geometry.recording import (
+from oaraim.geometry import frames, gpstime
+from oaraim.geometry.recording import (
     FORMAT_NAME,
     FORMAT_VERSION,
     Recording,
@@ -43,8 +42,8 @@ from geometry.recording import (
     tower_clock_m,
     validate_recording,
 )
-from geometry.sky import look_angles, satellites
-from geometry.trajectory import Scenario
+from oaraim.geometry.sky import look_angles, satellites
+from oaraim.geometry.trajectory import Scenario
 
 C_M_S = 299792458.0
 #: synthesized receiver clock (illustrative: a 1 km offset and a 0.3 m/s drift)

@@ -24,11 +24,10 @@ satellite), so they share the almanac propagation and ``sat_position_ecef`` sign
 import functools
 
 import numpy as np
-
-from geometry import gpstime
-from geometry.almanac import Almanac, AlmanacRecords
-from geometry.ephemeris import GALILEO, GPS
-from geometry.frames import OMEGA_E_GNSS_RAD_S
+from oaraim.geometry import gpstime
+from oaraim.geometry.almanac import Almanac, AlmanacRecords
+from oaraim.geometry.ephemeris import GALILEO, GPS
+from oaraim.geometry.frames import OMEGA_E_GNSS_RAD_S
 
 #: SPS PS Table 3.2-2 reference epoch: 0000Z (UTC) 1 July 1993. GPS - UTC was 9 s after the leap
 #: second of 30 June 1993 (IERS Bulletin C 5), hence + 9 s to express it in GPS time.

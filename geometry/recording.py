@@ -113,8 +113,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
-
-from geometry import frames
+from oaraim.geometry import frames
 
 FORMAT_NAME = "oaraim-recording"
 FORMAT_VERSION = 1

@@ -39,10 +39,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from geometry import atmosphere, gpstime
-from geometry.ephemeris import NavigationFileError, georinex_navigation, open_rinex_text
-from geometry.frames import (
+from oaraim.geometry import atmosphere, gpstime
+from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation, open_rinex_text
+from oaraim.geometry.frames import (
     C_M_S,
     _az_el_from_rotation,
     earth_rotation_correction,

@@ -21,11 +21,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-from geometry.almanac import Almanac, read_sem, read_yuma
-from geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
-from geometry.frames import ecef_to_geodetic, enu_rotation
-from geometry.nominal import galileo_walker, gps_24_slot
+from oaraim.geometry.almanac import Almanac, read_sem, read_yuma
+from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
+from oaraim.geometry.frames import ecef_to_geodetic, enu_rotation
+from oaraim.geometry.nominal import galileo_walker, gps_24_slot
 
 CONSTELLATION_CODES = {"gps": GPS, "galileo": GALILEO}
 

@@ -15,8 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-
-from geometry import gpstime
+from oaraim.geometry import gpstime
 
 
 class SP3Error(ValueError):

@@ -11,9 +11,8 @@ from dataclasses import dataclass
 
 import jax
 import numpy as np
-
-from mc.keys import realization_keys
-from mc.reduce import BLOCK
+from oaraim.mc.keys import realization_keys
+from oaraim.mc.reduce import BLOCK
 
 DEFAULT_CHUNK = 32 * BLOCK
 

@@ -57,10 +57,9 @@ from pathlib import Path
 import jax
 import numpy as np
 import xarray as xr
-
-from mc.keys import MAX_REALIZATIONS, realization_keys
-from mc.reduce import BLOCK
-from mc.runner import DEFAULT_CHUNK
+from oaraim.mc.keys import MAX_REALIZATIONS, realization_keys
+from oaraim.mc.reduce import BLOCK
+from oaraim.mc.runner import DEFAULT_CHUNK
 
 FORMAT_VERSION = 1
 MANIFEST = "sweep.json"
@@ -450,7 +449,7 @@ def _read_chunk(path: Path, meta: dict, reducers):
 
 
 def _normalized(obj):
-    from mc.store import _jsonable
+    from oaraim.mc.store import _jsonable
 
     return json.loads(json.dumps(_jsonable(obj), sort_keys=True, allow_nan=False,
                                  default=str))
@@ -675,7 +674,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     key_axes = tuple(key_axes)
     _check_args(axes, realizations, reducers, key_axes, workers, scheduler)
     if threads is None:
-        from araim.batching import default_threads
+        from oaraim.araim.batching import default_threads
 
         threads = default_threads()
     if not isinstance(threads, int | np.integer) or threads < 1:
@@ -750,7 +749,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     for ci, _, _ in tasks:
         chunks_left[ci] += 1
 
-    from mc.progress import SweepProgress
+    from oaraim.mc.progress import SweepProgress
 
     bar = SweepProgress(len(cells), todo_real, description or "sweep", enabled=progress)
     bar.cells_done(int(np.sum(chunks_left == 0)))

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from araim.validate import check_int, check_positive, check_probability, check_range
+from oaraim.araim.validate import check_int, check_positive, check_probability, check_range
 
 
 @dataclass(frozen=True)
@@ -157,7 +157,7 @@ class SweepStudy(Study):
     chunk_param: str = "chunk"  # the parameter giving realizations per task / chunk file
 
     def axes(self, params) -> tuple:
-        from mc.sweep import Axis
+        from oaraim.mc.sweep import Axis
 
         return tuple(Axis(k, tuple(params[k])) for k in self.axis_names)
 
@@ -172,7 +172,7 @@ class SweepStudy(Study):
 
     def chunk_size(self, params) -> int:
         """Realizations per task and chunk file (never changes a result)."""
-        from mc.runner import DEFAULT_CHUNK
+        from oaraim.mc.runner import DEFAULT_CHUNK
 
         return int(params.get(self.chunk_param, DEFAULT_CHUNK))
 
@@ -180,7 +180,7 @@ class SweepStudy(Study):
         """Keys per kernel call, the one shape the kernel is compiled for (a multiple of
         mc.reduce.BLOCK). XLA may round differently at another batch shape, so this is part of
         a run's identity (a resume must use the same). Override for bigger calls."""
-        from mc.reduce import BLOCK
+        from oaraim.mc.reduce import BLOCK
 
         return BLOCK
 
@@ -190,7 +190,7 @@ class SweepStudy(Study):
         line goes through ``studies.execute.run_study`` instead (resume, Dask, output folder)."""
         import tempfile
 
-        from studies.execute import run_sweep_study
+        from oaraim.studies.execute import run_sweep_study
 
         with tempfile.TemporaryDirectory(prefix="oaraim-sweep-") as tmp:
             result, _ = run_sweep_study(self, params, realizations, seed, tmp, progress=False)

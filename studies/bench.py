@@ -1,30 +1,19 @@
 """``oaraim bench``: throughput of the batched kernels against the NumPy reference, same run.
 
-The reference is the plain per-geometry code of ``tests/reference.py`` (DESIGN.md), loaded from
-the source tree; an installation without the tests reports it as unavailable.
+The reference is the plain per-geometry NumPy/SciPy code of ``oaraim.reference`` and
+``oaraim.reference_mhss`` (DESIGN.md), the same oracle the tests compare the kernels against; it
+ships with the package so an installed ``oaraim bench`` always reports the ratio.
 """
 
-import importlib.util
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.slopes import _slope_hpl_chunked
 
-import geometry
-from araim.chi2 import lambda_det_table
-from araim.slopes import _slope_hpl_chunked
-
-
-def load_reference():
-    path = Path(__file__).resolve().parent.parent / "tests" / "reference.py"
-    if not path.exists():
-        return None
-    spec = importlib.util.spec_from_file_location("oaraim_tests_reference", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from oaraim import geometry, reference, reference_mhss
 
 
 def _geometries(n, seed=0):
@@ -59,28 +48,26 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
     run()  # compile
     t = _best_time(run, repeats)
     out = {"batch": batch, "jax_s": t, "jax_hpl_per_s": batch / t}
-    ref = load_reference()
-    if ref is not None:
-        gn = np.asarray(g[:ref_geometries])
-        sq = float(np.sqrt(table[5]))
+    gn = np.asarray(g[:ref_geometries])
+    sq = float(np.sqrt(table[5]))
 
-        def run_ref():
-            return [np.max(ref.slopes_reference(gi, 1.0)) * sq for gi in gn]
+    def run_ref():
+        return [np.max(reference.slopes_reference(gi, 1.0)) * sq for gi in gn]
 
-        hpl_ref = np.array(run_ref())
-        t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
-        hpl_jax = np.asarray(_slope_hpl_chunked(g[:ref_geometries], sigma[:ref_geometries],
-                                                valid[:ref_geometries], table).hpl_m)
-        out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
-                   reference_s=t_ref,
-                   reference_hpl_per_s=ref_geometries / t_ref,
-                   speedup=(batch / t) / (ref_geometries / t_ref),
-                   max_rel_diff=float(np.max(np.abs(hpl_jax / hpl_ref - 1))))
+    hpl_ref = np.array(run_ref())
+    t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
+    hpl_jax = np.asarray(_slope_hpl_chunked(g[:ref_geometries], sigma[:ref_geometries],
+                                            valid[:ref_geometries], table).hpl_m)
+    out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
+               reference_s=t_ref,
+               reference_hpl_per_s=ref_geometries / t_ref,
+               speedup=(batch / t) / (ref_geometries / t_ref),
+               max_rel_diff=float(np.max(np.abs(hpl_jax / hpl_ref - 1))))
     return out
 
 
 def bench_fig3(realizations=1_000_000):
-    from studies.seed001_fig3 import Fig3Elevation
+    from oaraim.studies.seed001_fig3 import Fig3Elevation
 
     study = Fig3Elevation()
     params = study.validate({})
@@ -90,20 +77,10 @@ def bench_fig3(realizations=1_000_000):
             "share_el_star_0deg_pct": result.metrics["share_el_star_0deg_pct"]}
 
 
-def _load_tests_module(name):
-    path = Path(__file__).resolve().parent.parent / "tests" / f"{name}.py"
-    if not path.exists():
-        return None
-    spec = importlib.util.spec_from_file_location(f"oaraim_tests_{name}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_sop=1e-4):
     """The issue-3 benchmark case: 9 GPS (5 deg mask, ADD error models, Table I) + 4 BPP SOPs in
     one SOP constellation (sigma_URA^S = 3 m, P_s^S = 1e-4, P_const^S = 1e-4, b_nom 0)."""
-    import araim
+    from oaraim import araim
 
     k1, k2 = jax.random.split(jax.random.key(seed))
     az, el = geometry.random_sky(k1, n_gps, np.deg2rad(5.0), (n,))
@@ -125,8 +102,9 @@ def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_so
 
 def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/."""
-    import araim
-    from araim.batching import default_threads
+    from oaraim.araim.batching import default_threads
+
+    from oaraim import araim
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -151,43 +129,42 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
            "threads": default_threads(), "one_thread_pl_per_s": batch / t1,
            "status_ok_share": float(np.mean(np.asarray(res.status) == 0)),
            "n_modes": int(np.max(np.asarray(res.n_modes)))}
-    ref = _load_tests_module("reference_mhss")
-    if ref is not None:
-        xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
+    xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
 
-        def run_ref():
-            return [ref.protection_levels_reference(
-                xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
-                xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
-                max_order=order) for i in range(ref_geometries)]
+    def run_ref():
+        return [reference_mhss.protection_levels_reference(
+            xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
+            xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
+            max_order=order) for i in range(ref_geometries)]
 
-        # best of 3, as the JAX side is best of ``repeats`` after a warm-up call: one cold
-        # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
-        # (the reference measured 315-509 PL/s in three runs within 3 minutes)
-        refs = []
-        t_ref = _best_time(lambda: refs.append(run_ref()), MHSS_REFERENCE_REPEATS)
-        refs = refs[-1]
-        hpl_ref = np.array([r.hpl_m for r in refs])
-        vpl_ref = np.array([r.vpl_m for r in refs])
-        hpl = np.asarray(res.hpl_m[:ref_geometries])
-        vpl = np.asarray(res.vpl_m[:ref_geometries])
-        fin = np.isfinite(hpl_ref) & np.isfinite(hpl)
-        out.update(reference_geometries=ref_geometries, reference_repeats=MHSS_REFERENCE_REPEATS,
-                   reference_s=t_ref,
-                   reference_pl_per_s=ref_geometries / t_ref,
-                   speedup=(batch / t) / (ref_geometries / t_ref),
-                   max_abs_diff_m=float(max(np.max(np.abs(hpl - hpl_ref)[fin], initial=0),
-                                            np.max(np.abs(vpl - vpl_ref)[fin], initial=0))))
+    # best of 3, as the JAX side is best of ``repeats`` after a warm-up call: one cold
+    # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
+    # (the reference measured 315-509 PL/s in three runs within 3 minutes)
+    refs = []
+    t_ref = _best_time(lambda: refs.append(run_ref()), MHSS_REFERENCE_REPEATS)
+    refs = refs[-1]
+    hpl_ref = np.array([r.hpl_m for r in refs])
+    vpl_ref = np.array([r.vpl_m for r in refs])
+    hpl = np.asarray(res.hpl_m[:ref_geometries])
+    vpl = np.asarray(res.vpl_m[:ref_geometries])
+    fin = np.isfinite(hpl_ref) & np.isfinite(hpl)
+    out.update(reference_geometries=ref_geometries, reference_repeats=MHSS_REFERENCE_REPEATS,
+               reference_s=t_ref,
+               reference_pl_per_s=ref_geometries / t_ref,
+               speedup=(batch / t) / (ref_geometries / t_ref),
+               max_abs_diff_m=float(max(np.max(np.abs(hpl - hpl_ref)[fin], initial=0),
+                                        np.max(np.abs(vpl - vpl_ref)[fin], initial=0))))
     return out
 
 
 def profile_mhss(batch=65_536, repeats=3):
     """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding, in CPU
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
-    import araim
-    from araim.batching import jit_kernel, map_chunks
-    from araim.fault_modes import fault_modes_batch_last
-    from araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
+    from oaraim.araim.batching import jit_kernel, map_chunks
+    from oaraim.araim.fault_modes import fault_modes_batch_last
+    from oaraim.araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
+
+    from oaraim import araim
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -229,7 +206,7 @@ def bench_sky(repeats=3):
     (b) 1,000 receivers (a 0.1-degree grid around Madrid) x 288 epochs (24 h at 5 min).
     Best of ``repeats`` after a compiling call; the file's parse is cached per process and
     reported separately."""
-    from geometry import gpstime
+    from oaraim.geometry import gpstime
 
     t0 = float(gpstime.gps_seconds(2018, 6, 19))
     day30 = t0 + 30.0 * np.arange(2880)
@@ -245,7 +222,7 @@ def bench_sky(repeats=3):
     one("nominal", day30, rx)
     out["one_receiver_2880_epochs_nominal_s"] = _best_time(lambda: one("nominal", day30, rx),
                                                            repeats)
-    from geometry.datafiles import data_dir
+    from oaraim.geometry.datafiles import data_dir
 
     d = data_dir()
     nav = None if d is None else d / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz"

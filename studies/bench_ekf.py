@@ -12,9 +12,8 @@ import time
 
 import jax
 import numpy as np
-
-from araim import ekf_raim
-from geometry import trajectory
+from oaraim.araim import ekf_raim
+from oaraim.geometry import trajectory
 
 
 def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:

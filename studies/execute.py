@@ -4,10 +4,10 @@ import functools
 import time
 from pathlib import Path
 
-from mc.progress import ProgressBar
-from mc.store import provenance, write_results
-from studies.base import SweepStudy
-from studies.registry import STUDIES, get_study
+from oaraim.mc.progress import ProgressBar
+from oaraim.mc.store import provenance, write_results
+from oaraim.studies.base import SweepStudy
+from oaraim.studies.registry import STUDIES, get_study
 
 SWEEP_FLAGS = "--resume, --workers and --scheduler"
 
@@ -50,7 +50,7 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
                     scheduler=None, progress=True):
     """Run a ``SweepStudy`` through ``mc.sweep.run_sweep`` into ``out_dir`` (its chunks and
     sweep.json); returns (StudyResult from ``study.finish``, SweepResult)."""
-    from mc.sweep import run_sweep
+    from oaraim.mc.sweep import run_sweep
 
     sweep = run_sweep(
         functools.partial(sweep_kernel, _study_ref(study), params), study.axes(params),

@@ -1,16 +1,16 @@
 """All studies by name."""
 
-from studies.rinex_replay import RinexReplay
-from studies.seed000_ekf_raim import Seed000EkfRaim
-from studies.seed001_fig3 import Fig3Elevation
-from studies.seed001_fig4 import Fig4HplCdf
-from studies.seed001_fig5 import Fig5Madrid24h
-from studies.seed001_vehicle import Seed001Vehicle
-from studies.seed002_outlier import Seed002Outlier
-from studies.seed004_fig3 import Fig3OneSop
-from studies.seed004_fig4 import Fig4HplMaps
-from studies.seed004_theorems import Theorems
-from studies.seed004_uav import Seed004Uav
+from oaraim.studies.rinex_replay import RinexReplay
+from oaraim.studies.seed000_ekf_raim import Seed000EkfRaim
+from oaraim.studies.seed001_fig3 import Fig3Elevation
+from oaraim.studies.seed001_fig4 import Fig4HplCdf
+from oaraim.studies.seed001_fig5 import Fig5Madrid24h
+from oaraim.studies.seed001_vehicle import Seed001Vehicle
+from oaraim.studies.seed002_outlier import Seed002Outlier
+from oaraim.studies.seed004_fig3 import Fig3OneSop
+from oaraim.studies.seed004_fig4 import Fig4HplMaps
+from oaraim.studies.seed004_theorems import Theorems
+from oaraim.studies.seed004_uav import Seed004Uav
 
 STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
                                 Fig4HplMaps(), Theorems(), RinexReplay(), Seed000EkfRaim(),

@@ -3,7 +3,7 @@
 import json
 from pathlib import Path
 
-from studies.registry import STUDIES
+from oaraim.studies.registry import STUDIES
 
 
 def _fmt(v):

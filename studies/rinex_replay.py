@@ -39,16 +39,13 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-
-import araim
-import geometry
-from araim import snapshot
-from araim.error_models import sigma_multipath_m, sigma_noise_m
-from araim.mhss import required_order
-from geometry import gpstime, rinex_obs
-from geometry.datafiles import data_dir
-from geometry.frames import C_M_S
-from studies.base import (
+from oaraim.araim import snapshot
+from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
+from oaraim.araim.mhss import required_order
+from oaraim.geometry import gpstime, rinex_obs
+from oaraim.geometry.datafiles import data_dir
+from oaraim.geometry.frames import C_M_S
+from oaraim.studies.base import (
     Param,
     Study,
     StudyResult,
@@ -58,6 +55,8 @@ from studies.base import (
     positive,
     probability,
 )
+
+from oaraim import araim, geometry
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"

@@ -36,11 +36,8 @@ from pathlib import Path
 import jax
 import numpy as np
 import xarray as xr
-
-import geometry
-import mc
-from araim import ekf_raim, ekf_replay
-from studies.base import (
+from oaraim.araim import ekf_raim, ekf_replay
+from oaraim.studies.base import (
     NO_RECORDING,
     Param,
     Study,
@@ -52,6 +49,8 @@ from studies.base import (
     positive,
     probability,
 )
+
+from oaraim import geometry, mc
 
 #: runs per call of the vmapped drive kernel: one compiled shape, whatever the chunk
 MC_BATCH = 16

@@ -21,12 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
-
-import geometry
-from araim.chi2 import lambda_det_table
-from araim.slopes import _slopes_kernel
-from mc import EmpiricalCDF, Mean, run_chunked
-from studies.base import (
+from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.slopes import _slopes_kernel
+from oaraim.mc import EmpiricalCDF, Mean, run_chunked
+from oaraim.studies.base import (
     Param,
     Study,
     StudyResult,
@@ -37,6 +35,8 @@ from studies.base import (
     positive,
     probability,
 )
+
+from oaraim import geometry
 
 HPL_GRID_M = np.round(np.arange(0.0, 500.0 + 1e-9, 0.01), 2)
 

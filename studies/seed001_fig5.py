@@ -29,13 +29,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
-
-import geometry
-from araim.chi2 import lambda_det_table
-from araim.slopes import _slope_hpl_jit
-from geometry import gpstime
-from geometry.datafiles import data_dir
-from studies.base import (
+from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.slopes import _slope_hpl_jit
+from oaraim.geometry import gpstime
+from oaraim.geometry.datafiles import data_dir
+from oaraim.studies.base import (
     Param,
     Study,
     StudyResult,
@@ -46,6 +44,8 @@ from studies.base import (
     positive,
     probability,
 )
+
+from oaraim import geometry
 
 MDSCC_ECEF_M = (4849210.0, -360329.7, 4114920.0)  # DESIGN.md: seed 001 with y corrected
 VILL_FILE = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"

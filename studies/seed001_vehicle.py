@@ -27,13 +27,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
-
-import geometry
-from araim import snapshot
-from araim.error_models import gnss_variances
-from geometry import gnss_scenario, gpstime
-from geometry.recording import load_recording
-from studies.base import (
+from oaraim.araim import snapshot
+from oaraim.araim.error_models import gnss_variances
+from oaraim.geometry import gnss_scenario, gpstime
+from oaraim.geometry.recording import load_recording
+from oaraim.studies.base import (
     NO_RECORDING,
     Param,
     Study,
@@ -44,7 +42,9 @@ from studies.base import (
     positive,
     probability,
 )
-from studies.seed004_common import parse_nav, resolve_sky
+from oaraim.studies.seed004_common import parse_nav, resolve_sky
+
+from oaraim import geometry
 
 PUBLISHED_HPL_GPS_M = 15.01
 PUBLISHED_HPL_SOP_M = 8.29
@@ -108,7 +108,7 @@ class Seed001Vehicle(Study):
         t = np.arange(n_t) / params["rate_hz"]
         source, desc, real = resolve_sky(params["nav"])
         if real:
-            from studies.seed004_common import _day_start
+            from oaraim.studies.seed004_common import _day_start
             day = _day_start(source, True)
         else:
             day = float(gpstime.gps_seconds(2022, 1, 1))

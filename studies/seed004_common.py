@@ -33,14 +33,12 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
-
-import geometry
-from araim.budget import BUDGET_SEED004_TABLE_I
-from araim.error_models import gnss_variances, sop_variances
-from araim.mhss import _protection_levels, required_order
-from geometry import gpstime
-from studies import seed001_fig5 as fig5
-from studies.base import (
+from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.mhss import _protection_levels, required_order
+from oaraim.geometry import gpstime
+from oaraim.studies import seed001_fig5 as fig5
+from oaraim.studies.base import (
     Param,
     check_bpp_annulus,
     count,
@@ -49,6 +47,8 @@ from studies.base import (
     positive,
     probability,
 )
+
+from oaraim import geometry
 
 #: seed 004 section VI, ECEF metres
 ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)

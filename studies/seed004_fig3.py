@@ -24,11 +24,10 @@ has the all-in-view position and contributes nothing at these PLs.
 
 import numpy as np
 import xarray as xr
-
-from mc.sweep import Count, Mean, Min
-from studies import seed004_common as c
-from studies.base import Param, StudyResult, SweepStudy, axis, positive, probability
-from studies.seed004_fig4 import TOL_M, Fig4Cell
+from oaraim.mc.sweep import Count, Mean, Min
+from oaraim.studies import seed004_common as c
+from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, positive, probability
+from oaraim.studies.seed004_fig4 import TOL_M, Fig4Cell
 
 
 class Fig3OneSop(SweepStudy):

@@ -30,15 +30,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+from oaraim.araim.batching import jit_kernel
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fde import _separation
+from oaraim.araim.status import Status
+from oaraim.mc.sweep import Count, Max, Mean, Min
+from oaraim.studies import seed004_common as c
+from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count
 
-import geometry
-from araim.batching import jit_kernel
-from araim.error_models import gnss_variances, sop_variances
-from araim.fde import _separation
-from araim.status import Status
-from mc.sweep import Count, Max, Mean, Min
-from studies import seed004_common as c
-from studies.base import Param, StudyResult, SweepStudy, axis, count
+from oaraim import geometry
 
 RAISE_TOL_M = 2e-3
 #: "unchanged" separations: both sides are S y from different factorizations of the same

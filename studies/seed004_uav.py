@@ -46,17 +46,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
-
-import araim
-import geometry
-from araim import snapshot
-from araim.budget import BUDGET_SEED004_TABLE_I
-from araim.error_models import gnss_variances, sop_variances
-from araim.fde import solution_separation
-from araim.mhss import required_order
-from geometry import gnss_scenario, gpstime
-from geometry.recording import load_recording
-from studies.base import (
+from oaraim.araim import snapshot
+from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fde import solution_separation
+from oaraim.araim.mhss import required_order
+from oaraim.geometry import gnss_scenario, gpstime
+from oaraim.geometry.recording import load_recording
+from oaraim.studies.base import (
     NO_RECORDING,
     Param,
     Study,
@@ -68,7 +65,9 @@ from studies.base import (
     positive,
     probability,
 )
-from studies.seed004_common import parse_nav, resolve_sky
+from oaraim.studies.seed004_common import parse_nav, resolve_sky
+
+from oaraim import araim, geometry
 
 PUBLISHED_EPOCHS = 2880
 FLIGHT_S = 220.0
@@ -123,7 +122,7 @@ def synthesize(params, seed, scenario=None):
     _, carrier = sop_order(n_tw)
     source, desc, real = resolve_sky(params["nav"])
     if real:
-        from studies.seed004_common import _day_start
+        from oaraim.studies.seed004_common import _day_start
         day = _day_start(source, True)
     else:
         day = float(gpstime.gps_seconds(2022, 1, 1))

@@ -2,10 +2,7 @@ import gc
 
 import jax
 import pytest
-
-jax.config.update("jax_enable_x64", True)
-
-from geometry.datafiles import data_dir, data_required  # noqa: E402
+from oaraim.geometry.datafiles import data_dir, data_required  # noqa: E402
 
 
 @pytest.fixture(scope="session")

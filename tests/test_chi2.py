@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy import optimize, special, stats
 
-import araim
-from tests.reference import lambda_det_reference
+from oaraim import araim
+from oaraim.reference import lambda_det_reference
 
 P_FAS = [1e-2, 1e-3, 1e-5, 1e-7]
 P_MDS = [1e-1, 1e-3, 1e-5, 1e-7]

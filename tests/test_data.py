@@ -1,8 +1,7 @@
 """The shared real-data folder is found (CI sets OARAIM_REQUIRE_DATA=1, so this cannot skip)."""
 
 import pytest
-
-from geometry.datafiles import data_dir
+from oaraim.geometry.datafiles import data_dir
 
 
 def test_shared_data_folder_has_the_documented_files(shared_data):

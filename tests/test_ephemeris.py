@@ -4,11 +4,11 @@ import gzip
 
 import numpy as np
 import pytest
+from oaraim.geometry import gpstime
+from oaraim.geometry.ephemeris import check_navigation_file
+from oaraim.geometry.kepler import OrbitElements, orbit_ecef
 
-import geometry
-from geometry import gpstime
-from geometry.ephemeris import check_navigation_file
-from geometry.kepler import OrbitElements, orbit_ecef
+from oaraim import geometry
 
 
 @pytest.fixture(scope="module")

@@ -17,8 +17,7 @@ import math
 
 import numpy as np
 import pytest
-
-from araim import error_models as em
+from oaraim.araim import error_models as em
 
 F0 = 10.23e6
 ELS_DEG = np.array([5.0, 10.0, 15.0, 30.0, 45.0, 60.0, 90.0])

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import geometry
+from oaraim import geometry
 
 N_KS = 20_000  # samples per KS test
 P_MIN = 1e-3  # KS p-value below which a sampler is declared wrong (see module docstring)

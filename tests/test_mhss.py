@@ -17,13 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from oaraim.araim import Status
+from oaraim.araim.error_models import gnss_variances, sop_variances
 from scipy import optimize, special, stats
 
-import araim
-import geometry
-from araim import Status
-from araim.error_models import gnss_variances, sop_variances
-from tests import reference_mhss as ref
+from oaraim import araim, geometry
+from oaraim import reference_mhss as ref
 
 L_GPS, L_GAL, L_SOP = 12, 8, 8
 L = L_GPS + L_GAL + L_SOP
@@ -635,7 +634,7 @@ def test_input_checks_see_valid_sources_only(name, value, match):
     given: ``_input_flags``, then the host check for the message): a bad value at a valid
     source raises naming its argument; the same value at a source marked invalid (padding,
     whatever it holds) is accepted, and the PLs are those of the clean batch."""
-    from araim.mhss import prepare_inputs
+    from oaraim.araim.mhss import prepare_inputs
 
     keys = ["g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const",
             "valid"]
@@ -668,7 +667,7 @@ def test_required_order_is_the_largest_per_geometry_order():
     of the oracle's per-geometry orders (``reference_mhss.fault_mode_set``), capped at 3, for
     random batches of 1-4 present constellations with P_s 1e-6..1e-2 and P_const 1e-9..1e-3;
     and each single geometry gets its own order."""
-    from araim.mhss import required_order
+    from oaraim.araim.mhss import required_order
 
     rng = np.random.default_rng(7)
     n, n_src, n_const = 400, 10, 4
@@ -697,7 +696,7 @@ def test_root_finder_q_and_density_match_scipy():
     phi = exp(-t^2/2)/sqrt(2 pi) to 1e-15 plus the conditioning of exp at z = t^2/2 (an
     argument rounded by eps moves exp(-z) by z eps relative; both sides round z, twice:
     4 z eps), over t from -10 to 11 plus the branch point x = 1 (t = sqrt 2) from both sides."""
-    from araim.mhss import _q_and_density, _q_and_density_fast
+    from oaraim.araim.mhss import _q_and_density, _q_and_density_fast
 
     t = np.concatenate([np.linspace(-10.0, 11.0, 20_001),
                         np.sqrt(2.0) + np.array([-1e-12, 0.0, 1e-12])])
@@ -725,7 +724,7 @@ def test_root_finder_bracket_q_inverse_bounds():
       k_lo = approx - Q_INVERSE_APPROX_MARGIN (1e-3) is below Q^-1 (lower end valid);
     - the Chernoff end sqrt(-2 ln 2p) (0 above p = 1/2) is never below Q^-1 (upper end
       valid), and at most 0.52 above it for p >= 1e-300."""
-    from araim.mhss import Q_INVERSE_APPROX_MARGIN, q_inverse_approx
+    from oaraim.araim.mhss import Q_INVERSE_APPROX_MARGIN, q_inverse_approx
 
     p_low = np.logspace(-300.0, np.log10(0.5), 200_001)
     p = np.concatenate([p_low, 1.0 - p_low[p_low > 1e-15], np.linspace(0.3, 0.7, 20_001)])
@@ -768,7 +767,7 @@ def test_lower_slope_bound_holds_for_convex_and_concave_terms():
     for terms convex, concave (t < 0) and mixed on [x - delta, x], with exact SciPy values;
     Dl <= D = -R' (``_risk``, checked by central differences), and Dl = D where every term has
     t >= e / 2."""
-    from araim.mhss import _risk, _risk_lower_slope
+    from oaraim.araim.mhss import _risk, _risk_lower_slope
 
     coef, mean, sd, rhs = _random_pl_terms(3, n=3000)
     rng = np.random.default_rng(4)
@@ -796,7 +795,7 @@ def test_halley_step_one_term_closed_form():
     """One term c Q((x - m)/s) = rhs has the root m + s Q^-1(rhs / c). Halley's method in z
     space converges cubically: from 0.6 m (0.3 s) below the root, 6.8e-4 m after one step,
     8.7e-13 m after two."""
-    from araim.mhss import _halley_step, _risk_curvature
+    from oaraim.araim.mhss import _halley_step, _risk_curvature
 
     c, m, s = np.array([[1e-5]]), np.array([[3.0]]), np.array([[2.0]])
     rhs = np.array([1e-9])
@@ -821,7 +820,7 @@ def test_taylor_third_derivative_bound_holds():
     -45 to 45 (phi underflowing at either end); and its R, D, D2 are ``_risk_curvature``'s to
     1e-8 (that one's approximate Q) and D, D2 exactly. The bound for both forms of the sums
     (terms written out, and one array over the terms, used beyond ``UNROLL_TERMS`` terms)."""
-    from araim.mhss import TAYLOR_B3_FACTOR, TAYLOR_E_MAX, _risk_curvature, _risk_taylor
+    from oaraim.araim.mhss import TAYLOR_B3_FACTOR, TAYLOR_E_MAX, _risk_curvature, _risk_taylor
 
     coef, mean, sd, rhs = _random_pl_terms(5, n=3000, terms=12)
     rng = np.random.default_rng(6)
@@ -853,7 +852,7 @@ def test_risk_sums_unrolled_and_vectorised_agree():
     terms, for the rarely run parts of ``solve_pl`` and beyond ``UNROLL_TERMS`` terms, cheaper to
     compile) give the same R, D, lower slope, D2 and third-derivative bound to rounding
     (summation order only)."""
-    from araim.mhss import _risk, _risk_lower_slope, _risk_taylor
+    from oaraim.araim.mhss import _risk, _risk_lower_slope, _risk_taylor
 
     coef, mean, sd, rhs = _random_pl_terms(3)
     x = mean.max(axis=0) + sd.max(axis=0)
@@ -876,7 +875,7 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     90.6 %, with the first probe 97.7 %, then 99.6 %, 99.9 %, and the default rounds all.
     With one round allowed, the bracketed branch runs for the rest and still brackets the
     root; the bracketed solver alone agrees within 1e-3 m."""
-    from araim import mhss
+    from oaraim.araim import mhss
 
     coef, mean, sd, rhs = _random_pl_terms(11)
     root = _roots(coef, mean, sd, rhs)
@@ -913,8 +912,8 @@ def test_bench_case_is_proved_by_the_taylor_step():
     and the bracketed branch stay idle in (almost) every chunk. With both disabled (no probe
     round, bracketed solver returning NaN), at most 1 of 4096 geometries is NOT_CONVERGED
     (measured 2026-12-02: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
-    from araim import mhss
-    from studies.bench import mhss_bench_inputs
+    from oaraim.araim import mhss
+    from oaraim.studies.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(4096, seed=3)
 
@@ -942,9 +941,9 @@ def test_threaded_split_is_bit_identical_to_one_call():
     """araim.batching.map_threads: parts of whole chunks on host threads give exactly the bits
     of one call, for a batch that splits unevenly into 2 or 3 parts, and one that is not split
     (fewer than 2 chunks per thread)."""
-    from araim.batching import CHUNK
-    from araim.mhss import prepare_inputs, protection_levels_threaded
-    from studies.bench import mhss_bench_inputs
+    from oaraim.araim.batching import CHUNK
+    from oaraim.araim.mhss import prepare_inputs, protection_levels_threaded
+    from oaraim.studies.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
@@ -986,9 +985,9 @@ def test_kernel_compiler_options_change_no_bit():
     shape and seed of the threaded test above, whose compiled kernel it reuses). Checked once
     beyond this (2026-12-02): the 2000 random geometries of ``random_cases`` at orders 1, 2 and
     3 (whole, single and generic modes) and the FDE functions, all bit-identical."""
-    from araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
-    from araim.mhss import _protection_levels, prepare_inputs, protection_levels_threaded
-    from studies.bench import mhss_bench_inputs
+    from oaraim.araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
+    from oaraim.araim.mhss import _protection_levels, prepare_inputs, protection_levels_threaded
+    from oaraim.studies.bench import mhss_bench_inputs
 
     assert KERNEL_COMPILER_OPTIONS  # else this compares a kernel with itself
     x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)

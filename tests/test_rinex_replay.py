@@ -5,13 +5,12 @@ under OARAIM_REQUIRE_DATA=1)."""
 
 import numpy as np
 import pytest
+from oaraim.geometry import rinex_obs
+from oaraim.geometry.frames import C_M_S
+from oaraim.studies import rinex_replay
+from oaraim.studies.registry import STUDIES
 
-import araim
-import geometry
-from geometry import rinex_obs
-from geometry.frames import C_M_S
-from studies import rinex_replay
-from studies.registry import STUDIES
+from oaraim import araim, geometry
 
 STATIONS = ("07590920", "30400920")
 

@@ -6,13 +6,12 @@ import warnings
 import jax
 import numpy as np
 import pytest
+from oaraim.studies import seed001_fig5 as f5
+from oaraim.studies.execute import run_study
+from oaraim.studies.registry import STUDIES
 
-import geometry
-import mc
-from studies import seed001_fig5 as f5
-from studies.execute import run_study
-from studies.registry import STUDIES
-from tests.reference import slopes_reference
+from oaraim import geometry, mc
+from oaraim.reference import slopes_reference
 
 STUDY = STUDIES["seed001-fig5-madrid-24h"]
 SHORT = {"duration_h": 1.0, "step_s": 120.0}  # 30 epochs: seconds, not minutes

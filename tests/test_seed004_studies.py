@@ -8,13 +8,11 @@ checkable helpers, and the paper's statements at reduced size.
 import jax
 import numpy as np
 import pytest
+from oaraim.studies import seed004_common as c
+from oaraim.studies.registry import STUDIES
+from oaraim.studies.seed004_fig4 import Fig4Cell, largest_reducing_sigma, monotone_share
 
-import araim
-import geometry
-import mc
-from studies import seed004_common as c
-from studies.registry import STUDIES
-from studies.seed004_fig4 import Fig4Cell, largest_reducing_sigma, monotone_share
+from oaraim import araim, geometry, mc
 
 
 def test_receiver_is_orange_county():
@@ -144,7 +142,7 @@ def test_bad_axis_values_are_rejected():
 def test_keys_do_not_depend_on_axis_values_for_common_random_numbers():
     """key_axes = (): every cell of Fig. 4 uses the same keys (mc.sweep derives the cell key
     from the key axes only)."""
-    from mc.sweep import cell_key_id
+    from oaraim.mc.sweep import cell_key_id
 
     study = STUDIES["seed004-fig4-hpl-maps"]
     a = cell_key_id({"n_sops": 2, "p_s_sop": 1e-4, "sigma_ura_sop_m": 1.0}, study.key_axes)

@@ -14,11 +14,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from oaraim.araim import Status
 
-import araim
-import geometry
-from araim import Status
-from tests.reference import lambda_det_reference, slope_hpl_reference, slopes_reference
+from oaraim import araim, geometry
+from oaraim.reference import lambda_det_reference, slope_hpl_reference, slopes_reference
 
 L_BIG = 18  # 12 satellites + 6 towers at most
 L_SMALL = 8

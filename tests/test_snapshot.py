@@ -5,12 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from oaraim.araim import snapshot
+from oaraim.geometry import atmosphere
+from oaraim.geometry.frames import C_M_S
 
-import araim
-import geometry
-from araim import snapshot
-from geometry import atmosphere
-from geometry.frames import C_M_S
+from oaraim import araim, geometry
 
 # --------------------------------------------------------------------------- Klobuchar
 

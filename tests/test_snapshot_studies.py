@@ -3,11 +3,11 @@ recording round trip of the synthesis (geometry.gnss_scenario)."""
 
 import numpy as np
 import pytest
+from oaraim.geometry import gnss_scenario
+from oaraim.studies.registry import STUDIES
+from oaraim.studies.seed004_uav import synthesize
 
-import geometry
-from geometry import gnss_scenario
-from studies.registry import STUDIES
-from studies.seed004_uav import synthesize
+from oaraim import geometry
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
-
-from mc.keys import realization_keys
-from mc.reduce import BLOCK
-from mc.sweep import (
+from oaraim.mc.keys import realization_keys
+from oaraim.mc.reduce import BLOCK
+from oaraim.mc.sweep import (
     Axis,
     Count,
     Histogram,

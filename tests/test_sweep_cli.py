@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from oaraim.mc.sweep import Count, Histogram, Max, Mean
+from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive
+from oaraim.studies.cli import app
+from oaraim.studies.execute import run_study
 from typer.testing import CliRunner
 
-from mc.sweep import Count, Histogram, Max, Mean
-from studies.base import Param, StudyResult, SweepStudy, axis, count, positive
-from studies.cli import app
-from studies.execute import run_study
 from tests.test_sweep import EDGES, toy_factory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,7 +76,7 @@ BOOT = ("import studies.registry as r, tests.test_sweep_cli as t; r.STUDIES[t.TO
 
 @pytest.fixture
 def toy(monkeypatch):
-    from studies import registry
+    from oaraim.studies import registry
 
     monkeypatch.setitem(registry.STUDIES, TOY.name, TOY)
     return TOY

@@ -4,11 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from oaraim.araim import ekf
+from oaraim.geometry import clocks, imu, trajectory
+from oaraim.geometry.frames import C_M_S
 from scipy.linalg import expm
-
-from araim import ekf
-from geometry import clocks, imu, trajectory
-from geometry.frames import C_M_S
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,10 @@ times below any physically meaningful error. Compiled shapes are kept few: every
 
 import numpy as np
 import pytest
+from oaraim.araim import Status
 
-import araim
-from araim import Status
-from tests.reference import wnls_reference
+from oaraim import araim
+from oaraim.reference import wnls_reference
 
 L = 12  # padded number of sources
 B = 50  # epochs per small batch

@@ -1,0 +1,17 @@
+"""oaraim: Monte Carlo RAIM, ARAIM and opportunistic ARAIM (GNSS + signals of opportunity).
+
+The subpackages are ``oaraim.geometry`` (where transmitters are), ``oaraim.araim`` (what a
+receiver computes), ``oaraim.mc`` (how many epochs are run), ``oaraim.studies`` (the papers'
+figures, the CLI) and ``oaraim.data`` (the real GNSS files). The source tree keeps them as the
+top-level folders ``geometry/ araim/ mc/ studies/``; ``pyproject.toml`` installs them here.
+
+float64 is the toolkit's convention (integrity probabilities reach 1e-9, normal matrices are
+ill-conditioned near the edge of availability), so importing any part of oaraim enables JAX's
+64-bit mode, here and only here.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+__version__ = "0.2.0"
