@@ -5,6 +5,9 @@ The reference is the plain per-geometry NumPy/SciPy code of ``oaraim.reference``
 ships with the package so an installed ``oaraim bench`` always reports the ratio.
 """
 
+import datetime
+import os
+import platform
 import time
 
 import jax
@@ -14,6 +17,19 @@ from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.slopes import _slope_hpl_chunked
 
 from oaraim import geometry, reference, reference_mhss
+
+
+def host_info() -> dict:
+    """When and where a benchmark ran: UTC date, CPU count and model, JAX version."""
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((ln.split(":", 1)[1].strip() for ln in f
+                          if ln.startswith("model name")), model)
+    except OSError:
+        pass
+    return {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
+            "cpus": os.cpu_count(), "cpu_model": model, "jax": jax.__version__}
 
 
 def _geometries(n, seed=0):
@@ -47,7 +63,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
     run = lambda: _slope_hpl_chunked(g, sigma, valid, table).hpl_m.block_until_ready()  # noqa: E731
     run()  # compile
     t = _best_time(run, repeats)
-    out = {"batch": batch, "jax_s": t, "jax_hpl_per_s": batch / t}
+    out = {"batch": batch, "jax_s": t, "jax_hpl_per_s": batch / t, "host": host_info()}
     gn = np.asarray(g[:ref_geometries])
     sq = float(np.sqrt(table[5]))
 
@@ -74,7 +90,8 @@ def bench_fig3(realizations=1_000_000):
     t0 = time.perf_counter()
     result = study.run(params, realizations, 0, None)
     return {"realizations": realizations, "wall_s": time.perf_counter() - t0,
-            "share_el_star_0deg_pct": result.metrics["share_el_star_0deg_pct"]}
+            "share_el_star_0deg_pct": result.metrics["share_el_star_0deg_pct"],
+            "host": host_info()}
 
 
 def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_sop=1e-4):
@@ -128,7 +145,7 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     out = {"batch": batch, "jax_s": t, "jax_pl_per_s": batch / t,
            "threads": default_threads(), "one_thread_pl_per_s": batch / t1,
            "status_ok_share": float(np.mean(np.asarray(res.status) == 0)),
-           "n_modes": int(np.max(np.asarray(res.n_modes)))}
+           "n_modes": int(np.max(np.asarray(res.n_modes))), "host": host_info()}
     xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
 
     def run_ref():
@@ -218,7 +235,7 @@ def bench_sky(repeats=3):
         s.valid.block_until_ready()
         return s
 
-    out = {}
+    out = {"host": host_info()}
     one("nominal", day30, rx)
     out["one_receiver_2880_epochs_nominal_s"] = _best_time(lambda: one("nominal", day30, rx),
                                                            repeats)
@@ -241,3 +258,75 @@ def bench_sky(repeats=3):
     out["receivers_1000_x_288_epochs_nominal_s"] = _best_time(
         lambda: one("nominal", day300, grid), repeats)
     return out
+
+
+def _rate(x: float, unit: str) -> str:
+    return f"{x:,.0f} {unit}"
+
+
+def markdown_table(bench_json: dict) -> str:
+    """The benchmark table of the README and docs/benchmarks.md, from ``oaraim bench --json``.
+
+    One row per measured kernel: what it computes, the workload, its throughput, the NumPy
+    reference's throughput measured in the same run (where there is one), their ratio, the
+    machine (CPU count from the run's ``host`` record) and the date of the run.
+    """
+    def host(entry):
+        h = entry.get("host") or {}
+        cpus = h.get("cpus")
+        machine = f"{cpus} cores" if cpus else "-"
+        if h.get("jax"):
+            machine += f", JAX {h['jax']}"
+        return machine, h.get("date", "-")
+
+    rows = []
+    if "slope_hpl" in bench_json:
+        s = bench_json["slope_hpl"]
+        rows.append(("slope HPL (seed 001), `araim.slope_hpl` kernel",
+                     f"5 GPS + 4 SOPs, batch {s['batch']:,}",
+                     _rate(s["jax_hpl_per_s"], "HPL/s"),
+                     _rate(s["reference_hpl_per_s"], "HPL/s"), f"{s['speedup']:,.0f}x",
+                     *host(s)))
+    if "mhss" in bench_json:
+        m = bench_json["mhss"]
+        ref = (_rate(m["reference_pl_per_s"], "PL/s"), f"{m['speedup']:,.0f}x") \
+            if "speedup" in m else ("-", "-")
+        rows.append(("MHSS protection levels (seed 004), `araim.protection_levels`",
+                     f"9 GPS + 4 SOPs, Table I, {m['n_modes']} modes, batch {m['batch']:,}, "
+                     f"{m['threads']} threads",
+                     _rate(m["jax_pl_per_s"], "PL/s"), *ref, *host(m)))
+    if "fig3" in bench_json:
+        f = bench_json["fig3"]
+        rows.append(("`seed001-fig3-elevation` study", f"{f['realizations']:,} realizations",
+                     f"{f['wall_s']:.1f} s wall, compile included", "-", "-", *host(f)))
+    if "sky" in bench_json:
+        k = bench_json["sky"]
+        rows.append(("`geometry.sky`, nominal GPS + Galileo", "1 receiver x 2,880 epochs",
+                     f"{k['one_receiver_2880_epochs_nominal_s']:.3f} s", "-", "-", *host(k)))
+        rows.append(("`geometry.sky`, nominal GPS + Galileo", "1,000 receivers x 288 epochs",
+                     f"{k['receivers_1000_x_288_epochs_nominal_s']:.3f} s", "-", "-",
+                     *host(k)))
+    if "ekf_drive" in bench_json:
+        e = bench_json["ekf_drive"]
+        fallback = next((b.get("host") for b in bench_json.values()
+                         if isinstance(b, dict) and b.get("host")), {})
+        rows.append(("EKF-RAIM Monte Carlo (seed 000 drive), without and with exclusion",
+                     f"{e['runs']:,} runs x {e['epochs_per_run']:,} epochs",
+                     f"{e['wall_s']:.1f} s wall ({e['runs_per_s']:,.1f} runs/s)", "-", "-",
+                     *host({"host": e.get("host", fallback)})))
+    head = ("| kernel | workload | throughput | NumPy reference | ratio | machine | date |\n"
+            "|---|---|---|---|---|---|---|")
+    return "\n".join([head] + ["| " + " | ".join(r) + " |" for r in rows])
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser(
+        prog="python -m oaraim.studies.bench",
+        description="Print the Markdown benchmark table of an `oaraim bench --json` file.")
+    parser.add_argument("--table", metavar="JSON", required=True,
+                        help="the file written by `oaraim bench --json`")
+    with open(parser.parse_args().table) as fh:
+        print(markdown_table(json.load(fh)))
