@@ -2,12 +2,14 @@ import gc
 
 import jax
 import pytest
-from oaraim.geometry.datafiles import data_dir, data_required  # noqa: E402
+
+from oaraim.data import data_dir, data_required  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def shared_data():
-    """The real-data folder; skips without it, fails instead when OARAIM_REQUIRE_DATA=1."""
+    """The real-data folder (``OARAIM_DATA`` folder or ../shared/data beside the checkout);
+    skips without it, fails instead when OARAIM_REQUIRE_DATA=1."""
     d = data_dir()
     if d is None:
         msg = ("real GNSS files not found: set OARAIM_DATA or put shared/data beside the "

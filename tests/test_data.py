@@ -1,7 +1,7 @@
 """The shared real-data folder is found (CI sets OARAIM_REQUIRE_DATA=1, so this cannot skip)."""
 
 import pytest
-from oaraim.geometry.datafiles import data_dir
+from oaraim.data import DataUnavailable, data_dir
 
 
 def test_shared_data_folder_has_the_documented_files(shared_data):
@@ -12,5 +12,5 @@ def test_shared_data_folder_has_the_documented_files(shared_data):
 
 def test_oaraim_data_pointing_nowhere_is_a_clear_error(monkeypatch, tmp_path):
     monkeypatch.setenv("OARAIM_DATA", str(tmp_path / "missing"))
-    with pytest.raises(ValueError, match="OARAIM_DATA"):
+    with pytest.raises(DataUnavailable, match="OARAIM_DATA=.*neither a folder nor"):
         data_dir()
