@@ -428,8 +428,8 @@ def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S) -> Ep
       max_age_s: largest |t - t_oe| of a usable record (default 4 h).
 
     Raises:
-      NavigationFileError (a ValueError) naming the file and line when the file is missing,
-      malformed or truncated.
+      NavigationFileError: (a ValueError) naming the file and line when the file is missing,
+        malformed or truncated.
     """
     p = Path(path).expanduser()
     if not p.is_file():

@@ -191,8 +191,8 @@ def read_observations(path, max_epochs=None) -> Observations:
       never observed is dropped. Pseudoranges outside 18,000-30,000 km are marked not valid.
 
     Raises:
-      ObservationFileError (a ValueError) naming the file and what is missing: a missing file,
-      a bad header, no GPS L1 code observable (C1 / P1 or C1C / C1W / ...), no epochs.
+      ObservationFileError: (a ValueError) naming the file and what is missing: a missing
+        file, a bad header, no GPS L1 code observable (C1 / P1 or C1C / C1W / ...), no epochs.
     """
     p = Path(path).expanduser()
     if not p.is_file():
