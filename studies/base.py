@@ -116,6 +116,15 @@ class Study:
     default_realizations: int = 1
     quick_realizations: int = 1
     params: dict = {}
+    #: registry name (``oaraim.data``) of the real file that ``--set nav=auto`` uses, if any
+    nav_file: str = ""
+
+    def data_files(self, params: dict) -> tuple:
+        """Registry names (``oaraim data list``) of the real files a run with ``params`` reads:
+        ``reproduce`` fetches them before running and provenance records their sha256."""
+        if params.get("recording", NO_RECORDING) != NO_RECORDING:
+            return ()  # a replayed recording brings its own sky
+        return (self.nav_file,) if self.nav_file and params.get("nav") == "auto" else ()
 
     def validate(self, overrides: dict) -> dict:
         """Defaults updated with ``overrides`` (raw strings or values), each parsed and checked."""

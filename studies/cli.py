@@ -1,4 +1,4 @@
-"""The ``oaraim`` command line: list, run, report, bench, reproduce.
+"""The ``oaraim`` command line: list, run, report, bench, reproduce, data.
 
 User errors (a bad ``--set`` value, an unknown study or key) print one line naming what was
 wrong and exit with status 2, without a traceback.
@@ -19,7 +19,10 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 err = Console(stderr=True)
 out = Console()
 
-RESULTS_DIR = Path(__file__).resolve().parent.parent / "results"
+data_app = typer.Typer(add_completion=False, no_args_is_help=True,
+                       help="The real GNSS files: list them, fetch them, get a day's broadcast "
+                       "ephemeris.")
+app.add_typer(data_app, name="data")
 
 
 def _fail(msg: str):
@@ -108,36 +111,87 @@ def report(
 
 @app.command()
 def reproduce(
-    quick: Annotated[bool, typer.Option(help="quick size: minutes, results/ left untouched")] =
-    False,
+    quick: Annotated[bool, typer.Option(help="quick size: minutes; nothing written outside "
+                                        "OUT")] = False,
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
     seed: Annotated[int, typer.Option(help="study seed")] = 0,
     progress: Annotated[bool, typer.Option(help="show progress bars")] = True,
+    results: Annotated[Path | None, typer.Option(
+        "--results", help="full size only: copy each study's figures, summary.json and "
+        "provenance.json into DIR/STUDY and write DIR/REPORT.md (the committed results: "
+        "--results results)")] = None,
+    only: Annotated[list[str] | None, typer.Option(
+        "--only", hidden=True, help="run only these studies (tests)")] = None,
 ):
     """Run every study and print the reproduction report.
 
-    Full size also copies figures and summaries into results/ and writes results/REPORT.md.
+    The real files the studies need are fetched first (one line per file that cannot be had).
+    A failing study is reported as FAILED and the others still run; the exit status is 2 if
+    any failed. Full size writes OUT/REPORT.md, or DIR/REPORT.md with --results DIR.
     """
-    from oaraim.studies.execute import run_study
+    from oaraim.studies.execute import check_data, run_study
     from oaraim.studies.registry import STUDIES
     from oaraim.studies.report import build_report
 
-    for name in STUDIES:
-        summary, sdir, figures, wall = run_study(name, seed=seed, out=out_dir, quick=quick,
-                                                 show_progress=progress)
+    if quick and results is not None:
+        _fail("--results takes the full-size run: drop --quick, or drop --results (a quick run "
+              "writes only under --out)")
+    names = list(only or STUDIES)
+    unknown = [n for n in names if n not in STUDIES]
+    if unknown:
+        _fail(f"unknown study {unknown[0]!r}; known studies: {', '.join(STUDIES)}")
+    failures = {}
+    needs = {}
+    for name in names:
+        try:
+            needs[name] = STUDIES[name].data_files(STUDIES[name].validate({}))
+        except ValueError as e:
+            failures[name] = str(e)
+    missing = check_data([f for n in names for f in needs.get(n, ())], progress=progress)
+    for msg in missing.values():
+        err.print(f"[bold red]missing data:[/] {msg}", highlight=False, soft_wrap=True)
+    done = []
+    for name in names:
+        lost = [f for f in needs.get(name, ()) if f in missing]
+        if lost:
+            failures[name] = f"data file {', '.join(lost)} unavailable (see above)"
+        if name in failures:
+            err.print(f"{name}: FAILED: {failures[name]}", highlight=False, soft_wrap=True)
+            continue
+        try:
+            summary, sdir, figures, wall = run_study(name, seed=seed, out=out_dir, quick=quick,
+                                                     show_progress=progress)
+        except ValueError as e:
+            failures[name] = " ".join(str(e).split())
+        except Exception as e:  # noqa: BLE001 - one study's bug must not stop the others
+            failures[name] = (f"{type(e).__name__}: {' '.join(str(e).split())} (rerun "
+                              f"`oaraim run {name}` for the traceback)")
+        if name in failures:
+            err.print(f"{name}: FAILED: {failures[name]}", highlight=False, soft_wrap=True)
+            continue
+        done.append(name)
         err.print(f"{name}: {wall:.1f} s -> {sdir}", highlight=False)
-        if not quick:
-            dest = RESULTS_DIR / name
+        if results is not None:
+            dest = results / name
             dest.mkdir(parents=True, exist_ok=True)
             for f in [*figures, sdir / "summary.json", sdir / "provenance.json"]:
                 shutil.copy2(f, dest / Path(f).name)
-    if not quick:
-        text = build_report(RESULTS_DIR, figure_dir=RESULTS_DIR)
-        (RESULTS_DIR / "REPORT.md").write_text(text + "\n")
-        err.print(f"wrote {RESULTS_DIR / 'REPORT.md'}", highlight=False)
-    else:
-        text = build_report(out_dir)
-    print(text)
+    text = None
+    if done:
+        if quick:
+            text = build_report(out_dir, only=done)
+        else:
+            folder = out_dir if results is None else results
+            text = build_report(folder, figure_dir=folder, only=done)
+            (folder / "REPORT.md").write_text(text + "\n")
+            err.print(f"wrote {folder / 'REPORT.md'}", highlight=False)
+        print(text)
+    if failures:
+        err.print(f"[bold red]{len(failures)} of {len(names)} studies failed:[/]",
+                  highlight=False)
+        for name, msg in failures.items():
+            err.print(f"  {name}: {msg}", highlight=False, soft_wrap=True)
+        raise typer.Exit(2)
 
 
 @app.command()
@@ -200,6 +254,77 @@ def bench(
               f"<= 60 s)", highlight=False)
     if json_out is not None:
         json_out.write_text(json.dumps(res, indent=2) + "\n")
+
+
+@data_app.command("list")
+def data_list():
+    """Every known real file: size, whether it is here (data folder / cache), origin, licence."""
+    from oaraim import data
+
+    try:
+        rows = [(e, data.status(e.name)[0]) for e in data.registry().values()]
+        where = data.where()
+    except data.DataUnavailable as e:
+        _fail(str(e))
+    t = Table(title="oaraim data files", show_lines=False)
+    for col in ("name", "size", "here", "origin", "licence"):
+        t.add_column(col, overflow="fold")
+    style = {"folder": "green", "cached": "green", "missing": "yellow"}
+    for e, state in rows:
+        t.add_row(e.name, f"{e.size / 1e3:,.0f} kB", f"[{style[state]}]{state}[/]", e.url,
+                  e.licence)
+    out.print(t)
+    out.print(f"files come from {where}", highlight=False, soft_wrap=True)
+
+
+@data_app.command("fetch")
+def data_fetch(
+    names: Annotated[list[str] | None, typer.Argument(
+        help="file names as `oaraim data list` shows them")] = None,
+    all_: Annotated[bool, typer.Option("--all", help="every known file")] = False,
+    progress: Annotated[bool, typer.Option(help="show a progress bar on a terminal")] = True,
+):
+    """Fetch files into the cache (checksums checked); prints each file's local path."""
+    from oaraim import data
+
+    reg = data.registry()
+    if all_ and names:
+        _fail("give file names or --all, not both")
+    if not all_ and not names:
+        _fail("give file names (see `oaraim data list`) or --all")
+    unknown = [n for n in names or () if n not in reg]
+    if unknown:
+        _fail(f"unknown data file {unknown[0]!r}; known files: {', '.join(reg)}")
+    failed = 0
+    for name in (list(reg) if all_ else names):
+        try:
+            p = data.path(name, progress=progress)
+        except data.DataUnavailable as e:
+            err.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
+            failed += 1
+            continue
+        out.print(f"{name}: {p}", highlight=False, soft_wrap=True)
+    if failed:
+        raise typer.Exit(2)
+
+
+@data_app.command("nav")
+def data_nav(
+    date: Annotated[str, typer.Argument(help="the day, YYYY-MM-DD")],
+    archive: Annotated[str | None, typer.Option(
+        help="archive base URL laid out as BASE/YYYY/DDD/FILE (default: OARAIM_BRDC_ARCHIVE, "
+        "else BKG's IGS BRDC folder)")] = None,
+    progress: Annotated[bool, typer.Option(help="show a progress bar on a terminal")] = True,
+):
+    """The IGS merged daily broadcast ephemeris of a day; prints its path (for --set nav=PATH).
+    """
+    from oaraim import data
+
+    try:
+        p = data.fetch_daily_nav(date, archive=archive, progress=progress)
+    except data.DataUnavailable as e:
+        _fail(str(e))
+    print(p)
 
 
 def main():

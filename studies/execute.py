@@ -101,12 +101,46 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
     wall_s = time.perf_counter() - t0
     summary = {"study": study.name, "title": study.title, "rows": result.rows,
                "metrics": result.metrics}
+    extra["data_files"] = data_provenance(study, params)
     prov = provenance(study.name, params, seed, realizations, wall_s,
                       realization=study.realization, seed_paper=study.seed_file,
                       **{**result.extra_provenance, **extra})
     write_results(out_dir, result.dataset, summary, prov)
     figures = study.plot(out_dir)
     return summary, out_dir, figures, wall_s
+
+
+def data_provenance(study, params):
+    """{name or path: {"path", "sha256"}} of the real files the run read: the registry files of
+    ``study.data_files(params)`` and any file given as ``nav``/``obs``/``recording``."""
+    from oaraim import data
+
+    out = {}
+    for name in study.data_files(params):
+        try:
+            p = data.path(name, fetch=False)
+        except data.DataUnavailable:
+            continue
+        out[name] = {"path": str(p), "sha256": data.sha256(p)}
+    for key in ("nav", "obs", "recording"):
+        v = params.get(key)
+        if isinstance(v, str) and v not in ("auto", "nominal", "none") and Path(v).is_file():
+            out[v] = {"path": v, "sha256": data.sha256(v)}
+    return out
+
+
+def check_data(names, progress=True):
+    """Fetch each registry file in ``names`` now (the data folder or cache first); returns
+    {name: one-line error} for those that cannot be had."""
+    from oaraim import data
+
+    missing = {}
+    for name in dict.fromkeys(names):
+        try:
+            data.path(name, progress=progress)
+        except data.DataUnavailable as e:
+            missing[name] = str(e)
+    return missing
 
 
 def _sweep_provenance(sweep, resume):

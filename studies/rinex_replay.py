@@ -43,7 +43,6 @@ from oaraim.araim import snapshot
 from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
 from oaraim.araim.mhss import required_order
 from oaraim.geometry import gpstime, rinex_obs
-from oaraim.geometry.datafiles import data_dir
 from oaraim.geometry.frames import C_M_S
 from oaraim.studies.base import (
     Param,
@@ -56,7 +55,7 @@ from oaraim.studies.base import (
     probability,
 )
 
-from oaraim import araim, geometry
+from oaraim import araim, data, geometry
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"
@@ -111,19 +110,24 @@ def parse_choice(*choices):
     return parse
 
 
+def data_files(obs, nav):
+    """Registry names (``oaraim.data``) the parameters ask for."""
+    if obs != "auto":
+        return ()
+    return (DEFAULT_OBS, DEFAULT_NAV) if nav == "auto" else (DEFAULT_OBS,)
+
+
 def resolve_files(obs, nav):
-    """(obs path, nav path) from the parameters; a clear error when the data are missing."""
-    hint = ("pass --set obs=PATH --set nav=PATH (RINEX observation and navigation files) or "
-            "set OARAIM_DATA to the shared data folder")
+    """(obs path, nav path) from the parameters; 'auto' files come from ``oaraim.data`` (the
+    data folder, else fetched into the cache); one line with the fix when one is missing."""
+    hint = "pass --set obs=PATH --set nav=PATH (RINEX observation and navigation files)"
     if obs == "auto":
-        d = data_dir()
-        p = None if d is None else d / DEFAULT_OBS
-        if p is None or not p.is_file():
-            raise ValueError(f"the default observation file {DEFAULT_OBS} was not found "
-                             f"(OARAIM_DATA or ../shared/data beside the checkout); {hint}")
-        obs = str(p)
-        if nav == "auto":
-            nav = str(d / DEFAULT_NAV)
+        try:
+            obs = str(data.path(DEFAULT_OBS))
+            if nav == "auto":
+                nav = str(data.path(DEFAULT_NAV))
+        except data.DataUnavailable as e:
+            raise data.DataUnavailable(f"{e}; or {hint}") from None
     rinex_obs.check_observation_file(obs)  # an obs/nav mix-up is named before nav lookup
     if nav == "auto":
         p = Path(obs)
@@ -307,11 +311,15 @@ class RinexReplay(Study):
     realization = "one epoch of the observation file (--realizations N: the first N epochs)"
     default_realizations = 2880
     quick_realizations = 2880
+
+    def data_files(self, params):
+        return data_files(params["obs"], params["nav"])
+
     params = {
-        "obs": Param("auto", parse_path, "RINEX 2/3 observation file ('auto': shared "
-                     f"{DEFAULT_OBS})"),
-        "nav": Param("auto", parse_path, "RINEX 2/3 GPS navigation file ('auto': the shared "
-                     "file, or the .yyn beside the obs file)"),
+        "obs": Param("auto", parse_path, "RINEX 2/3 observation file ('auto': "
+                     f"{DEFAULT_OBS}, fetched if missing: `oaraim data list`)"),
+        "nav": Param("auto", parse_path, "RINEX 2/3 GPS navigation file ('auto': "
+                     f"{DEFAULT_NAV} with the default obs, else the .yyn beside the obs file)"),
         "truth": Param("header", parse_truth, "true receiver position X,Y,Z (ECEF m) or "
                        "'header' (APPROX POSITION XYZ)", "m"),
         "mask_deg": Param(5.0, in_range(0.0, 60.0), "elevation mask (ARAIM practice 5 deg; "

@@ -3,8 +3,9 @@
 Setup (seed 001 section 4.1): a stationary receiver at the Madrid Deep Space Communications
 Complex, DESIGN.md's corrected ECEF (4,849,210; -360,329.7; 4,114,920) m = 40.4292 N, 4.2497 W,
 839.7 m; the GPS sky over 24 h from a broadcast ephemeris "collected at the MDSCC": here the
-Villafranca (VILL, ~25 km from MDSCC) RINEX 3 file of 2018-06-19 when the shared data are
-present, else the built-in SPS 24-slot constellation with a warning (``sky_source`` in
+Villafranca (VILL, ~25 km from MDSCC) RINEX 3 file of 2018-06-19 (``oaraim.data``: the data
+folder, else fetched into the cache; a missing file stops the run with the command that fetches
+it), or the built-in SPS 24-slot constellation on ``--set nav=nominal`` only (``sky_source`` in
 provenance and summary says which); 5 simulated SOP towers; slope HPL of seed 001 section 3.1.
 
 One realization = one BPP draw of the 5 towers at one epoch (d in [5 m, 3 km], uniform in area,
@@ -22,7 +23,6 @@ sigma at which our GPS-only mean equals the published 19.45 m and what the GPS-S
 """
 
 import functools
-import warnings
 from pathlib import Path
 
 import jax
@@ -32,7 +32,6 @@ import xarray as xr
 from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.slopes import _slope_hpl_jit
 from oaraim.geometry import gpstime
-from oaraim.geometry.datafiles import data_dir
 from oaraim.studies.base import (
     Param,
     Study,
@@ -45,11 +44,11 @@ from oaraim.studies.base import (
     probability,
 )
 
-from oaraim import geometry
+from oaraim import data, geometry
 
 MDSCC_ECEF_M = (4849210.0, -360329.7, 4114920.0)  # DESIGN.md: seed 001 with y corrected
 VILL_FILE = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"
-#: day of the Villafranca file, used by the nominal fallback too
+#: day of the Villafranca file, used by the nominal sky too
 DEFAULT_DAY = (2018, 6, 19)
 PUBLISHED_MEAN_GPS_M = 19.45
 PUBLISHED_MEAN_SOP_M = 11.60
@@ -80,7 +79,7 @@ def parse_receiver(name, v):
 
 
 def parse_nav(name, v):
-    """'auto' (the study's default file if present, else nominal), 'nominal', or a file path."""
+    """'auto' (the study's default real file), 'nominal' (built-in constellation), or a path."""
     v = str(v).strip()
     if v in ("auto", "nominal"):
         return v
@@ -104,20 +103,18 @@ def parse_date(name, v):
 
 
 def resolve_sky(nav, default_file=VILL_FILE):
-    """(source, description, is_real_file): DESIGN.md's default-sky rule. ``nav`` is 'auto'
-    (``default_file`` under the data folder if present, else the nominal constellation with a
-    warning), 'nominal', or a file path."""
+    """(source, description, is_real_file). ``nav`` is 'auto' (registry file ``default_file``
+    through ``oaraim.data.path``: the data folder, else fetched into the cache; unavailable ->
+    ``DataUnavailable``, one line with the fix), 'nominal' (the built-in constellation, only
+    when asked for), or a file path. There is no silent fallback to the nominal sky."""
     if nav == "nominal":
         return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008), requested", False
     if nav == "auto":
-        d = data_dir()
-        p = None if d is None else d / default_file
-        if p is None or not p.is_file():
-            warnings.warn(f"{default_file} not found (OARAIM_DATA / ../shared/data); using the "
-                          "built-in nominal GPS 24-slot constellation instead of real "
-                          "ephemerides", stacklevel=2)
-            return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008): real file not found", False
-        nav = str(p)
+        try:
+            nav = str(data.path(default_file))
+        except data.DataUnavailable as e:
+            raise data.DataUnavailable(f"{e}; or run with --set nav=nominal (the built-in "
+                                       "24-slot GPS constellation) or --set nav=PATH") from None
     return nav, f"broadcast ephemeris {Path(nav).name}", True
 
 
@@ -202,9 +199,11 @@ class Fig5Madrid24h(Study):
     realization = "one BPP draw of the 5 towers at one epoch (--realizations = draws per epoch)"
     default_realizations = 1000
     quick_realizations = 100
+    nav_file = VILL_FILE
     params = {
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (Villafranca file from OARAIM_DATA, "
-                     "else nominal), 'nominal', or a RINEX navigation file"),
+        "nav": Param("auto", parse_nav, f"GPS sky: 'auto' ({VILL_FILE}, fetched if missing: "
+                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
+                     "navigation file"),
         "receiver": Param(_mdscc_lla(), parse_receiver,
                           "receiver LAT_DEG,LON_DEG,H_M (MDSCC, DESIGN.md corrected)"),
         "date": Param("auto", parse_date, "day YYYY-MM-DD ('auto': the file's day, "

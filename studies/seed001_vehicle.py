@@ -6,9 +6,10 @@ Setup (stated choices; seed 001 gives neither route, date, rates nor sigmas):
     towers of the same group's seed 000; seed 001's vehicle experiment is by the same group, in
     the same area, with 5 LTE towers), or ``drive=seed002-drive``. Epochs at the scenario's
     10 Hz pseudorange rate over the drive (``duration_s`` shortens it).
-  * GPS sky: broadcast ephemeris ``nav/brdc0010.22n`` (2022-01-01) from OARAIM_DATA at
-    ``start_h`` = 18.0 h GPS time (10:00 local), else the nominal 24-slot constellation with a
-    warning (provenance says which); mask 15 deg (seed 001 section 3.2: "typically around 15").
+  * GPS sky: broadcast ephemeris ``nav/brdc0010.22n`` (2022-01-01; ``oaraim.data``, fetched
+    if missing) at ``start_h`` = 18.0 h GPS time (10:00 local), or the nominal 24-slot
+    constellation on ``--set nav=nominal`` (provenance says which); mask 15 deg (seed 001
+    section 3.2: "typically around 15").
   * Measurements: ``geometry.gnss_scenario`` (module docstring). Noise: GPS N(0, C_acc(el))
     (ADD accuracy model, sigma_URE = 2/3 sigma_URA = 0.67 m plus troposphere and user terms),
     LTE N(0, 2^2 m^2) (the scenario's "meter-level" LTE ranging).
@@ -42,7 +43,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-from oaraim.studies.seed004_common import parse_nav, resolve_sky
+from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
 
 from oaraim import geometry
 
@@ -69,13 +70,15 @@ class Seed001Vehicle(Study):
     default_realizations = 100
     quick_realizations = 20
     test_realizations = 64
+    nav_file = NAV_FILE
     params = {
         "drive": Param("seed000-drive", parse_drive, "scenario of geometry.trajectory"),
         "duration_s": Param(0.0, in_range(0.0, 1e4), "replay the first duration_s of the drive "
                             "(0: all of it)", "s"),
         "rate_hz": Param(10.0, in_range(0.1, 100.0), "epoch rate (scenario: 10 Hz)", "Hz"),
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (brdc0010.22n from OARAIM_DATA, else "
-                     "nominal), 'nominal', or a RINEX navigation file"),
+        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
+                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
+                     "navigation file"),
         "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the start, hours of the file's "
                          "day (our choice: 10:00 local)", "h"),
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 001: ~15 deg)",

@@ -6,8 +6,9 @@ geometric distribution of GPS satellites is varied by randomizing the time ... u
 time of a day"; SOPs by BPP (section III-D); Table I integrity constants.
 
 GPS sky (DESIGN.md, default sky): the broadcast file ``nav/brdc0010.22n`` (IGS merged GPS
-navigation of 2022-01-01, 31 satellites) from OARAIM_DATA when present, else the built-in SPS
-24-slot constellation with a warning; ``sky_source`` in the summary and provenance says which.
+navigation of 2022-01-01, 31 satellites) through ``oaraim.data`` (fetched if missing; a file
+that cannot be had stops the run), or on ``--set nav=nominal`` only the built-in SPS
+24-slot constellation; ``sky_source`` in the summary and provenance says which.
 The sky is tabulated once per run at ``sky_step_s`` (10 s) over the file's day and a
 realization draws its epoch uniformly from that table: a GPS satellite moves at most ~0.02 deg
 in 10 s as seen from the ground, so a 10 s grid over 86,400 s is as good as continuous time
@@ -53,7 +54,7 @@ from oaraim import geometry
 #: seed 004 section VI, ECEF metres
 ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)
 NAV_FILE = "nav/brdc0010.22n"
-#: the day of the nominal fallback: that of NAV_FILE
+#: the day of the nominal sky: that of NAV_FILE
 DEFAULT_DAY = (2022, 1, 1)
 #: Table I, GPS
 SIGMA_URA_GPS_M = 1.0
@@ -68,15 +69,16 @@ SIGMA_GRID_M = (0.5, *[float(s) for s in range(1, 26)])
 P_S_GRID = tuple(float(f"{m}e{e}") for e in range(-7, -1) for m in (1, 3)) + (0.1,)
 
 
-#: 'auto' (NAV_FILE if present, else nominal), 'nominal', or a navigation file
+#: 'auto' (NAV_FILE, fetched if missing), 'nominal', or a navigation file
 parse_nav = fig5.parse_nav
 
 
 def common_params():
     """Parameters every seed 004 sweep study exposes (defaults above)."""
     return {
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (brdc0010.22n from OARAIM_DATA, else "
-                     "nominal), 'nominal', or a RINEX navigation file"),
+        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
+                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
+                     "navigation file"),
         "mask_deg": Param(5.0, in_range(0.0, 89.0),
                           "GPS elevation mask (seed 004 silent; ARAIM practice 5 deg)", "deg"),
         "sky_step_s": Param(10.0, in_range(1.0, 600.0),
@@ -96,8 +98,8 @@ check_geometry_params = check_bpp_annulus
 
 
 def resolve_sky(nav):
-    """(source for geometry.sky, description, is a real file): DESIGN.md's default-sky rule
-    with ``NAV_FILE``."""
+    """(source for geometry.sky, description, is a real file): ``fig5.resolve_sky`` with
+    ``NAV_FILE`` (no silent nominal fallback)."""
     return fig5.resolve_sky(nav, NAV_FILE)
 
 

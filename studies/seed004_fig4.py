@@ -161,6 +161,7 @@ class Fig4HplMaps(SweepStudy):
                    "cell's result is the mean over its realizations")
     default_realizations = 5000
     quick_realizations = 1024
+    nav_file = c.NAV_FILE
     axis_names = ("n_sops", "p_s_sop", "sigma_ura_sop_m")
     key_axes = ()  # common random numbers across every cell (seed004_common)
     params = {

@@ -7,9 +7,9 @@ Setup:
     over the flight (t_k = k 220 / 2880 s, 13.09 Hz). One realization = one epoch;
     ``--realizations N`` replays the first N of the ``n_epochs`` epochs.
   * GPS sky: broadcast ephemeris ``nav/brdc0010.22n`` (2022-01-01; the seed does not date the
-    flight) from OARAIM_DATA at ``start_h`` = 18.0 h GPS time (10:00 local, a daylight flight;
-    chosen before any result), else the nominal 24-slot constellation with a warning
-    (provenance says which). Mask 15 deg (seed 004 VII-B).
+    flight; ``oaraim.data``, fetched if missing) at ``start_h`` = 18.0 h GPS time (10:00 local,
+    a daylight flight; chosen before any result), or the nominal 24-slot constellation on
+    ``--set nav=nominal`` (provenance says which). Mask 15 deg (seed 004 VII-B).
   * Towers in three SOP constellations (DESIGN.md: three carriers): azimuth-sorted tower j
     belongs to carrier j mod 3 (A: 4 towers, B: 4, C: 3, interleaved in azimuth). SOPs are
     numbered carrier A first, then B, then C, and are added in that order (seed 004 VII-D:
@@ -65,7 +65,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-from oaraim.studies.seed004_common import parse_nav, resolve_sky
+from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
 
 from oaraim import araim, geometry
 
@@ -188,9 +188,11 @@ class Seed004Uav(Study):
     default_realizations = PUBLISHED_EPOCHS
     quick_realizations = PUBLISHED_EPOCHS
     test_realizations = 400
+    nav_file = NAV_FILE
     params = {
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (brdc0010.22n from OARAIM_DATA, else "
-                     "nominal), 'nominal', or a RINEX navigation file"),
+        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
+                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
+                     "navigation file"),
         "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the take-off, hours of the "
                          "file's day (our choice: 10:00 local)", "h"),
         "n_epochs": Param(PUBLISHED_EPOCHS, count(10, 100000),

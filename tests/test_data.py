@@ -1,6 +1,7 @@
 """The shared real-data folder is found (CI sets OARAIM_REQUIRE_DATA=1, so this cannot skip)."""
 
 import pytest
+
 from oaraim.data import DataUnavailable, data_dir
 
 

@@ -81,7 +81,8 @@ def test_rinex3_observation_file(tmp_path):
 def test_study_without_data_says_how_to_give_files(tmp_path, monkeypatch):
     monkeypatch.setenv("OARAIM_DATA", str(tmp_path))  # an existing folder without the files
     study = STUDIES["rinex-replay"]
-    with pytest.raises(ValueError, match=r"--set obs=PATH --set nav=PATH.*OARAIM_DATA"):
+    with pytest.raises(ValueError, match=r"obs/07590920.05o is not in the folder OARAIM_DATA="
+                       r".*--set obs=PATH --set nav=PATH"):
         study.run(study.validate({}), 10, 0, None)
     with pytest.raises(ValueError, match="obs must be 'auto' or an existing RINEX file"):
         study.validate({"obs": str(tmp_path / "x.05o")})

@@ -76,20 +76,43 @@ def test_parameters_rejected_with_field_names():
     assert p["receiver"] == (40.43, -4.25, 840.0)
 
 
-def test_nominal_fallback_when_data_folder_is_empty(tmp_path, monkeypatch):
-    """DESIGN.md default-sky rule: without the Villafranca file the study warns, uses the
-    nominal 24-slot constellation and says so in summary and provenance."""
+def test_auto_sky_without_the_file_stops_with_one_line(tmp_path, monkeypatch):
+    """No silent fallback (issue 19): nav=auto with the Villafranca file nowhere stops before
+    any computation, exit 2, one line naming the file, the fetch command and nav=nominal."""
+    from oaraim.studies.cli import app
+    from typer.testing import CliRunner
+
     empty = tmp_path / "data"
     empty.mkdir()
     monkeypatch.setenv("OARAIM_DATA", str(empty))
-    with pytest.warns(UserWarning, match="using the built-in nominal GPS 24-slot"):
+    r = CliRunner().invoke(app, ["run", STUDY.name, "--realizations", "16", "--out",
+                                 str(tmp_path / "out"), "--set", "duration_h=1", "--set",
+                                 "step_s=120", "--no-progress"], catch_exceptions=False)
+    assert r.exit_code == 2
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in r.output, r.output
+    assert "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz" in lines[0]
+    assert f"not in the folder OARAIM_DATA={empty}" in lines[0]
+    assert "--set nav=nominal" in lines[0]
+    assert not (tmp_path / "out" / STUDY.name / "summary.json").exists()
+
+
+def test_explicit_nominal_sky(tmp_path, monkeypatch):
+    """--set nav=nominal (only) gives the built-in 24-slot constellation, said in summary and
+    provenance, with no warning and no data folder needed."""
+    empty = tmp_path / "data"
+    empty.mkdir()
+    monkeypatch.setenv("OARAIM_DATA", str(empty))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         summary, sdir, figures, _ = run_study(STUDY.name, realizations=16, out=tmp_path / "out",
-                                              sets=["duration_h=1", "step_s=120"],
+                                              sets=["nav=nominal", "duration_h=1", "step_s=120"],
                                               show_progress=False)
     assert summary["metrics"]["real_ephemeris"] is False
     assert "nominal GPS 24-slot" in summary["metrics"]["sky_source"]
     prov = json.loads((sdir / "provenance.json").read_text())
     assert prov["real_ephemeris"] is False and "nominal" in prov["sky_source"]
+    assert prov["data_files"] == {}
     keys = {r["quantity"] for r in summary["rows"]}
     assert {"mean GPS-only HPL over 24 h", "mean GPS + 5 SOPs HPL over 24 h"} <= keys
     assert all(set(r) >= {"quantity", "unit", "published", "reproduced", "note"}
@@ -107,6 +130,10 @@ def test_real_file_small_run(shared_data, tmp_path):
                                         show_progress=False)
     m = summary["metrics"]
     assert m["real_ephemeris"] is True and "VILL00ESP" in m["sky_source"]
+    from oaraim import data
+
+    prov = json.loads((sdir / "provenance.json").read_text())
+    assert prov["data_files"][f5.VILL_FILE]["sha256"] == data.entry(f5.VILL_FILE).sha256
     import xarray as xr
 
     ds = xr.open_zarr(sdir / "data.zarr", consolidated=False)

@@ -125,9 +125,9 @@ def _n(study, n):
 @pytest.mark.parametrize("name", list(STUDIES))
 def test_study_results_bit_identical_for_any_chunk_size(name, request):
     study = STUDIES[name]
-    if getattr(study, "requires_data", False):
-        request.getfixturevalue("shared_data")  # skips (or fails under OARAIM_REQUIRE_DATA)
     small = SMALL.get(name, {})
+    if getattr(study, "requires_data", False) or study.data_files(study.validate(small)):
+        request.getfixturevalue("shared_data")  # skips (or fails under OARAIM_REQUIRE_DATA)
     a = study.run(study.validate({"chunk": 1024, **small}), _n(study, 3000), 4, None)
     b = study.run(study.validate({"chunk": 4096, **small}), _n(study, 3000), 4, None)
     xr.testing.assert_identical(a.dataset, b.dataset)
@@ -136,7 +136,9 @@ def test_study_results_bit_identical_for_any_chunk_size(name, request):
 
 @pytest.mark.parametrize("name", list(STUDIES))
 def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request):
-    if getattr(STUDIES[name], "requires_data", False):
+    study = STUDIES[name]
+    if getattr(study, "requires_data", False) or \
+            study.data_files(study.validate(SMALL.get(name, {}))):
         request.getfixturevalue("shared_data")
     sets = [f"{k}={v}" for k, v in SMALL.get(name, {}).items()]
     n = _n(STUDIES[name], 2048)

@@ -1,0 +1,328 @@
+"""oaraim.data and `oaraim data` against a loopback mirror of ../shared/data (issue 19).
+
+Every server here is an http.server on 127.0.0.1, port 0, in a thread, shut down at teardown;
+nothing leaves the machine. The mirror counts the requests it answers, so a cache hit is seen
+as no request at all.
+"""
+
+import functools
+import gzip
+import http.server
+import shutil
+import socket
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from oaraim.studies.base import Study, StudyResult
+from oaraim.studies.cli import app
+from oaraim.studies.registry import STUDIES
+from typer.testing import CliRunner
+
+from oaraim import data
+
+SMALL = "almanac/almmops.txt"
+runner = CliRunner()
+
+
+class _Handler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args):  # quiet
+        pass
+
+    def do_GET(self):  # noqa: N802 - http.server's name
+        self.server.paths.append(self.path)
+        super().do_GET()
+
+
+@pytest.fixture
+def serve():
+    """serve(folder) -> base URL of a loopback HTTP server of ``folder`` (request log in
+    ``.paths`` of the returned server)."""
+    servers = []
+
+    def start(folder):
+        handler = functools.partial(_Handler, directory=str(folder))
+        srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+        srv.paths = []
+        srv.timeout = 5
+        threading.Thread(target=srv.serve_forever, daemon=True).start()
+        servers.append(srv)
+        return f"http://127.0.0.1:{srv.server_address[1]}/", srv
+
+    yield start
+    for srv in servers:
+        srv.shutdown()
+        srv.server_close()
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    c = tmp_path / "cache"
+    monkeypatch.setenv("OARAIM_CACHE", str(c))
+    return c
+
+
+def _refused_url():
+    """A loopback URL nobody listens on (a port just bound and released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    return f"http://127.0.0.1:{port}/"
+
+
+def _one_line(text):
+    assert "Traceback" not in text, text
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+def test_registry_covers_every_shared_file_with_its_checksum(shared_data):
+    on_disk = sorted(str(p.relative_to(shared_data)) for p in shared_data.rglob("*")
+                     if p.is_file() and p.name != "README.md")
+    reg = data.registry()
+    assert sorted(reg) == on_disk
+    for name, e in reg.items():
+        assert e.size == (shared_data / name).stat().st_size, name
+        assert e.sha256 == data.sha256(shared_data / name), name
+        assert e.url.startswith("https://raw.githubusercontent.com/"), name
+        assert e.url.endswith("/" + Path(name).name) and e.licence and e.description
+
+
+def test_fetch_from_mirror_then_from_cache(shared_data, serve, cache, monkeypatch):
+    url, srv = serve(shared_data)
+    monkeypatch.setenv("OARAIM_DATA", url)
+    assert data.status(SMALL) == ("missing", None)
+    p = data.path(SMALL, progress=False)
+    assert p == cache / SMALL
+    assert p.read_bytes() == (shared_data / SMALL).read_bytes()
+    assert srv.paths == ["/" + SMALL]
+    assert data.path(SMALL) == p and srv.paths == ["/" + SMALL]  # cached: no request
+    assert data.status(SMALL) == ("cached", p)
+
+
+def test_file_url_mirror(shared_data, cache, monkeypatch):
+    monkeypatch.setenv("OARAIM_DATA", shared_data.as_uri())
+    p = data.path("obs/07590920.05n")
+    assert p == cache / "obs/07590920.05n"
+    assert p.read_bytes() == (shared_data / "obs/07590920.05n").read_bytes()
+
+
+@pytest.mark.parametrize("scheme", ["http", "file"])
+def test_checksum_mismatch_names_both_hashes_and_keeps_nothing(shared_data, serve, cache,
+                                                               tmp_path, monkeypatch, scheme):
+    bad = tmp_path / "mirror"
+    (bad / "almanac").mkdir(parents=True)
+    body = bytearray((shared_data / SMALL).read_bytes())
+    body[100] ^= 1  # one flipped bit
+    (bad / SMALL).write_bytes(bytes(body))
+    monkeypatch.setenv("OARAIM_DATA", serve(bad)[0] if scheme == "http" else bad.as_uri())
+    with pytest.raises(data.DataUnavailable) as exc:
+        data.path(SMALL)
+    msg = str(exc.value)
+    assert "\n" not in msg and SMALL in msg
+    import hashlib
+
+    assert f"expected sha256 {data.entry(SMALL).sha256}, got " \
+           f"{hashlib.sha256(bytes(body)).hexdigest()}" in msg
+    assert [p for p in cache.rglob("*") if p.is_file()] == []
+
+
+def test_offline_mirror_is_one_line_with_the_command(cache, monkeypatch):
+    monkeypatch.setenv("OARAIM_DATA", _refused_url())
+    with pytest.raises(data.DataUnavailable) as exc:
+        data.path(SMALL)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"data file {SMALL}: download from http://127.0.0.1:")
+    assert "Connection refused" in msg and f"`oaraim data fetch {SMALL}`" in msg
+
+
+def test_missing_on_mirror_is_http_404(serve, cache, tmp_path, monkeypatch):
+    monkeypatch.setenv("OARAIM_DATA", serve(tmp_path)[0])
+    with pytest.raises(data.DataUnavailable, match=f"data file {SMALL}: .* failed: HTTP 404"):
+        data.path(SMALL)
+
+
+def test_folder_without_the_file_names_folder_and_fix(tmp_path, monkeypatch):
+    monkeypatch.setenv("OARAIM_DATA", str(tmp_path))
+    with pytest.raises(data.DataUnavailable,
+                       match=f"data file {SMALL} is not in the folder OARAIM_DATA={tmp_path}; "
+                       "copy it into"):
+        data.path(SMALL)
+    with pytest.raises(data.DataUnavailable, match="unknown data file 'nav/x.10n'; known files: "
+                       "almanac/alm_gal_ed259.txt"):
+        data.path("nav/x.10n")
+
+
+# ------------------------------------------------------------------------------------ CLI
+
+
+def test_cli_data_list_and_fetch(shared_data, serve, cache, monkeypatch):
+    url, srv = serve(shared_data)
+    monkeypatch.setenv("OARAIM_DATA", url)
+    monkeypatch.setenv("COLUMNS", "250")
+    r = runner.invoke(app, ["data", "list"], catch_exceptions=False)
+    assert r.exit_code == 0
+    row = next(ln for ln in r.output.splitlines() if SMALL in ln)
+    assert "missing" in row and "stanford-gps-lab/maast" in row and "13 kB" in row
+    assert f"files come from the mirror OARAIM_DATA={url}" in r.output
+    r = runner.invoke(app, ["data", "fetch", SMALL, "--no-progress"], catch_exceptions=False)
+    assert r.exit_code == 0 and r.output.strip() == f"{SMALL}: {cache / SMALL}"
+    r = runner.invoke(app, ["data", "list"], catch_exceptions=False)
+    assert "cached" in next(ln for ln in r.output.splitlines() if SMALL in ln)
+
+
+def test_cli_data_fetch_unknown_name_and_offline(cache, monkeypatch):
+    monkeypatch.setenv("OARAIM_DATA", _refused_url())
+    r = runner.invoke(app, ["data", "fetch", "nav/nope.22n"], catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    assert "unknown data file 'nav/nope.22n'" in line and "nav/brdc0010.22n" in line
+    r = runner.invoke(app, ["data", "fetch", SMALL, "--no-progress"], catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    assert SMALL in line and "Connection refused" in line and "oaraim data fetch" in line
+    r = runner.invoke(app, ["data", "fetch"], catch_exceptions=False)
+    assert r.exit_code == 2 and "--all" in _one_line(r.output)
+
+
+@pytest.mark.parametrize("codec", [".Z", ".gz"])
+def test_cli_data_nav_from_an_archive(shared_data, serve, cache, tmp_path, codec):
+    """2010-07-01 = day 182: the archive holds brdc1820.10n compressed as IGS archives do;
+    the RINEX 3 names are tried first (404), then the RINEX 2 ones."""
+    import ncompress
+
+    day = tmp_path / "archive" / "2010" / "182"
+    day.mkdir(parents=True)
+    raw = (shared_data / "nav/brdc1820.10n").read_bytes()
+    packed = ncompress.compress(raw) if codec == ".Z" else gzip.compress(raw)
+    (day / f"brdc1820.10n{codec}").write_bytes(packed)
+    url, srv = serve(tmp_path / "archive")
+    r = runner.invoke(app, ["data", "nav", "2010-07-01", "--archive", url, "--no-progress"],
+                      catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    p = Path(r.output.strip())
+    assert p.parent == cache / "brdc"
+    assert p.name == ("brdc1820.10n" if codec == ".Z" else "brdc1820.10n.gz")
+    assert srv.paths == ["/2010/182/BRDC00IGS_R_20101820000_01D_MN.rnx.gz",
+                         "/2010/182/BRDC00WRD_R_20101820000_01D_MN.rnx.gz",
+                         "/2010/182/brdc1820.10n.gz"] + \
+        (["/2010/182/brdc1820.10n.Z"] if codec == ".Z" else [])
+    assert data.sha256(p) in p.with_name(p.name + ".sha256").read_text()
+    from oaraim import geometry
+
+    eph = geometry.load_navigation(p, systems=("G",))
+    assert "421 records" in repr(eph)
+    r = runner.invoke(app, ["data", "nav", "2010-07-01", "--archive", url], catch_exceptions=False)
+    assert r.exit_code == 0 and Path(r.output.strip()) == p  # cached: no new request
+    assert len(srv.paths) == (4 if codec == ".Z" else 3)
+
+
+def test_cli_data_nav_errors(serve, cache, tmp_path):
+    url, _ = serve(tmp_path)
+    r = runner.invoke(app, ["data", "nav", "2010-07-01", "--archive", url],
+                      catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    assert "no daily broadcast file of 2010-07-01 (day 182)" in line and "--archive" in line
+    r = runner.invoke(app, ["data", "nav", "2010-13-01"], catch_exceptions=False)
+    assert r.exit_code == 2 and "YYYY-MM-DD" in _one_line(r.output)
+    r = runner.invoke(app, ["data", "nav", "2010-07-01", "--archive", _refused_url()],
+                      catch_exceptions=False)
+    assert r.exit_code == 2 and "Connection refused" in _one_line(r.output)
+
+
+# ----------------------------------------------------------------------- studies, reproduce
+
+
+def test_study_with_auto_sky_and_offline_mirror_exits_2_with_one_line(cache, monkeypatch,
+                                                                       tmp_path):
+    monkeypatch.setenv("OARAIM_DATA", _refused_url())
+    r = runner.invoke(app, ["run", "seed004-fig3-one-sop", "--realizations", "1024", "--out",
+                            str(tmp_path), "--no-progress"], catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    assert "data file nav/brdc0010.22n: download from" in line
+    assert "`oaraim data fetch nav/brdc0010.22n`" in line and "--set nav=nominal" in line
+
+
+class _FakeStudy(Study):
+    title = "a study for the reproduce tests"
+    realization = "nothing"
+    params = {}
+
+    def __init__(self, name, fail=None):
+        self.name, self.fail = name, fail
+
+    def run(self, params, realizations, seed, progress):
+        if self.fail is not None:
+            raise self.fail
+        ds = xr.Dataset({"x": ("i", np.arange(3.0))})
+        return StudyResult(ds, [{"quantity": "answer", "unit": "-", "published": 42.0,
+                                 "reproduced": 42.0, "note": ""}], {})
+
+    def plot(self, out_dir):
+        return []
+
+
+@pytest.fixture
+def fakes(monkeypatch):
+    for s in (_FakeStudy("fake-ok"), _FakeStudy("fake-bug", RuntimeError("boom\nsecond line")),
+              _FakeStudy("fake-input", ValueError("x must be > 0, got -1"))):
+        monkeypatch.setitem(STUDIES, s.name, s)
+
+
+def test_reproduce_reports_failures_and_runs_the_rest(fakes, cache, monkeypatch, tmp_path):
+    monkeypatch.setenv("OARAIM_DATA", _refused_url())
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["reproduce", "--quick", "--out", str(out), "--no-progress",
+                            "--only", "seed001-fig5-madrid-24h", "--only", "fake-bug",
+                            "--only", "fake-ok", "--only", "fake-input"],
+                      catch_exceptions=False)
+    assert r.exit_code == 2
+    text = r.output
+    assert "Traceback" not in text
+    assert sum(ln.startswith("missing data: data file nav/VILL00ESP") for ln in
+               text.splitlines()) == 1
+    assert "seed001-fig5-madrid-24h: FAILED: data file nav/VILL00ESP_R_20181700000_01D_MN" \
+           ".rnx.gz unavailable (see above)" in text
+    assert "fake-bug: FAILED: RuntimeError: boom second line (rerun `oaraim run fake-bug` for " \
+           "the traceback)" in text
+    assert "fake-input: FAILED: x must be > 0, got -1" in text
+    assert "## fake-ok" in text and "## fake-bug" not in text
+    assert "3 of 4 studies failed:" in text
+    assert not (out / "REPORT.md").exists()  # quick: the report is printed only
+
+
+def test_reproduce_full_size_writes_report_under_out_or_results(fakes, tmp_path):
+    out, res = tmp_path / "out", tmp_path / "results"
+    r = runner.invoke(app, ["reproduce", "--out", str(out), "--no-progress", "--only",
+                            "fake-ok"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    assert "## fake-ok" in (out / "REPORT.md").read_text() and not res.exists()
+    r = runner.invoke(app, ["reproduce", "--out", str(out), "--no-progress", "--only",
+                            "fake-ok", "--only", "fake-bug", "--results", str(res)],
+                      catch_exceptions=False)
+    assert r.exit_code == 2
+    assert sorted(p.name for p in (res / "fake-ok").iterdir()) == ["provenance.json",
+                                                                   "summary.json"]
+    assert not (res / "fake-bug").exists()
+    report = (res / "REPORT.md").read_text()
+    assert "## fake-ok" in report and "fake-bug" not in report
+    r = runner.invoke(app, ["reproduce", "--quick", "--results", str(res)],
+                      catch_exceptions=False)
+    assert r.exit_code == 2 and "--results takes the full-size run" in _one_line(r.output)
+
+
+def test_cli_source_never_points_at_its_own_folder():
+    """The installed CLI computes no path from its own location (no results/ beside it)."""
+    import inspect
+
+    from oaraim.studies import cli
+
+    src = inspect.getsource(cli)
+    assert "__file__" not in src and "RESULTS_DIR" not in src
+    shutil.which("oaraim")  # the entry point exists in the venv
