@@ -3,11 +3,10 @@
 The MHSS kernel holds a few (modes x sources) arrays per geometry; over a batch of 65,536 each
 is ~100 MB and the kernel becomes memory-bound (measured: 23k PL/s unchunked, 80k PL/s in
 chunks of 1024, 9 GPS + 4 SOPs, 2 cores). ``lax.map`` over fixed-size chunks keeps every
-intermediate small: after the Newton root finder (2026-11-25, otherwise idle machine, best of 5
-per setting, two passes) chunks of 64 / 128 / 256 / 1024 / 4096 gave 118k / 146-188k /
-154-159k / 129-133k / 132k PL/s; 256 was the steadiest then. Since the kernel got ~5x faster
-its chunk traffic matters more: 2026-12-02 (stop 17), 2 host threads, interleaved in one
-process, median of 9 rounds: 829k PL/s at 128 against 787k at 256 for the bench case (9 GPS +
+intermediate small. With an older, ~5x slower kernel, chunks of 64 / 128 / 256 / 1024 / 4096
+gave 118k / 146-188k / 154-159k / 129-133k / 132k PL/s and 256 was the steadiest; with the
+current kernel the chunk's traffic weighs more (measured on 2 host threads, interleaved in one
+process, median of 9 rounds): 829k PL/s at 128 against 787k at 256 for the bench case (9 GPS +
 4 SOPs, order 1), 157k against 147k for 8 SOPs at P_s^S = 1e-2 (order 2, Fig. 4's heaviest
 cells); 64 equals 128 (766k / 768k), 512 and above are slower (one core: 2.25 / 2.55 / 2.73
 CPU-us per PL at 256 / 512 / 1024). A (modes x 3 x sources) array of the bench case is 0.6 MB
@@ -29,7 +28,7 @@ import jax.numpy as jnp
 
 #: XLA options of every jit that holds the MHSS kernel (``jit_kernel``): prefer 512-bit vectors.
 #: XLA:CPU prefers 256-bit vectors by default, also on AVX-512 processors; this project's
-#: machines are Sapphire Rapids (AVX-512). Measured 2026-12-02, 9 GPS + 4 SOPs, batch 65,536,
+#: machines are Sapphire Rapids (AVX-512). Measured with 9 GPS + 4 SOPs, batch 65,536,
 #: interleaved in one process (8 rounds, best of 3 each): 2 host threads 458-463k PL/s (median)
 #: against 395-407k with 256 (+13-16 %); one core (taskset) 2.9-3.1 against 3.4-3.5 CPU-us per
 #: PL. Every output bit-identical (elementwise IEEE operations give the same lanes at any
@@ -109,8 +108,8 @@ def map_chunks(fn, arrays, batch_shape, chunk=CHUNK):
 def default_threads():
     """Host threads over which ``map_threads`` splits a large batch: ``OARAIM_THREADS``, else
     2, the cores of this project's machines. XLA runs one chunked MHSS program on ~1.6 cores
-    and two programs side by side on ~2, and the pair gives 1.9x the PL/s of one (measured
-    2026-12-01, 9 GPS + 4 SOPs, batch 65,536: 166-180k PL/s in one call, 309-336k PL/s in two
+    and two programs side by side on ~2, and the pair gives 1.9x the PL/s of one (measured on
+    2 cores, 9 GPS + 4 SOPs, batch 65,536: 166-180k PL/s in one call, 309-336k PL/s in two
     threads; four threads 302k, eight 248k). ``OARAIM_THREADS=1`` turns the split off."""
     v = os.environ.get("OARAIM_THREADS", "2")
     try:
@@ -137,8 +136,8 @@ def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK, part_fn=None
     ``part_fn(start, size, *flat)``, if given, computes ``fn`` on rows [start, start + size)
     of the flat arrays and slices them inside its own jit (``slice_rows``; ``start`` traced,
     so one compilation serves every part): the parts are then not copied out of the batch
-    first. Measured 2026-12-02, bench case (65,536 geometries, 2 parts): the copies took
-    6.7 ms of a ~85 ms call.
+    first. Measured on the bench case (65,536 geometries, 2 parts): the copies took 6.7 ms of
+    a ~85 ms call.
     """
     threads = default_threads() if threads is None else int(threads)
     n_chunks = -(-math.prod(batch_shape) // chunk)
@@ -168,7 +167,7 @@ _EXECUTORS_LOCK = threading.Lock()
 
 def _executor(threads):
     """A thread pool per thread count, kept for the process (starting the threads cost ~1-2 ms
-    per call, measured 2026-12-02); its idle threads end with the interpreter. A part that
+    per call, measured); its idle threads end with the interpreter. A part that
     calls ``map_threads`` again runs that call's parts itself (its pool may be the one it
     occupies: tested)."""
     with _EXECUTORS_LOCK:
@@ -182,7 +181,7 @@ def _executor(threads):
 def _join(outs, batch_shape, n):
     """The parts' outputs concatenated, padding dropped, ``batch_shape`` restored: one program
     (one copy per output) instead of a dispatch per output and step (~2 ms per call at the
-    bench's 9 outputs, measured 2026-12-02)."""
+    bench's 9 outputs, measured)."""
     return _unflatten(jax.tree.map(lambda *ys: jnp.concatenate(ys), *outs), batch_shape, n)
 
 

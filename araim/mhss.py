@@ -61,7 +61,7 @@ PL_TOLERANCE_M = 1e-3
 #: converged). Measured (PLs not converged, of 3 per geometry) on the 2000 random geometries of
 #: tests/test_mhss.py (Table I, up to 150 modes, P_s^S up to 0.1, sigma_URA^S up to 25 m,
 #: orders up to 3): 5 iterations leave 41, 8 leave 9, 12 leave 1, 16 none; order 1 needs 5;
-#: the 9 GPS + 4 SOP bench case 2 since stop 12 (Newton's last step taken unevaluated).
+#: the 9 GPS + 4 SOP bench case 2 (Newton's last step taken unevaluated).
 #: Non-convergence is reported, never hidden.
 PL_ITERATIONS = 20
 #: a Newton step shorter than this ends the iteration of its element (the PL tolerance is 1e-3 m):
@@ -182,8 +182,8 @@ class Projection(NamedTuple):
     sigma_acc_u: jax.Array  # (B,)
 
 
-# Stores dropped in stop 17 (2026-12-02): where an intermediate is not stored with
-# ``linalg.materialize`` although an earlier stop stored it. Every remaining store site of the
+# Stores dropped: where an intermediate is not stored with ``linalg.materialize`` although an
+# earlier version of the kernel stored it. Every remaining store site of the
 # bench kernel was measured dropped alone (one core, CPU time, interleaved), then together.
 # Seven stores cost more than they saved once the root finder evaluates its terms twice
 # instead of three times: cw and cw2 of ``solve_pl``, the start factors of
@@ -287,7 +287,7 @@ def _centered_rows(g, w_int, member):
     for c in range(member.shape[1]):
         wc = w_int * memf[:, c]
         s_c = _sum(wc, 0)
-        # (not stored: stop 17, note above ``_blocks``)
+        # (not stored: note above ``_blocks``)
         inv = jnp.where(s_c > 0, 1.0 / jnp.where(s_c > 0, s_c, 1.0), 0.0)
         for a in range(3):
             mean = linalg.materialize(_sum(wc * g[:, a], 0) * inv)
@@ -317,7 +317,7 @@ def _whole_modes(keep, w_int, gt, b_nom, var_acc):
     lower, ok = linalg.cholesky(n, scale=_sum(w, 1))
     zero = jnp.zeros_like(n[0][0])
     inv = [linalg.cholesky_solve(lower, [zero + (1.0 if j == q else 0.0) for j in range(3)])
-           for q in range(3)]  # (not stored: stop 17, note above ``_blocks``)
+           for q in range(3)]  # (not stored: note above ``_blocks``)
     # S_q,l = sum_a inv_qa w_l g~_l,a from the inverse's columns as (M, 3, B) arrays (zero
     # where singular), by broadcasting: a stack over q of the (M, L, B) rows, fused into the
     # sums below, ran one branchy loop per element (measured 8 % of the kernel slower)
@@ -384,7 +384,7 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     for m in range(L):
         spread = spread + c[:, m] ** 2 * var_acc[m]
     sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
-    # (not stored before ``_blocks`` writes them into the mode arrays: stop 17, note above it)
+    # (not stored before ``_blocks`` writes them into the mode arrays: note above it)
     return s_pos, var_pos, bias, sigma_ss, ok
 
 
@@ -407,7 +407,7 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
              if input_flags else None)
     fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
                                 max_order)
-    g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: stop 17, note above ``_blocks``)
+    g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: note above ``_blocks``)
     w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
     var_acc = linalg.materialize(jnp.where(valid, var_acc, 0.0))
@@ -728,7 +728,7 @@ def _halley_step(x, r, d, d2, z_rhs):
 #: probe; the rest goes to the bracketed solver. Measured on the 2000 random geometries of
 #: tests/test_mhss.py (bracketed solver disabled), geometries with a PL not proved after 0..5
 #: probes: order 1 141 / 78 / 2 / 0; order 2 439 / 188 / 39 / 17 / 5 / 2; order 3 516 / 232 /
-#: 65 / 38 / 17 / 11 (stop 16's probe-only path: exactly these shifted by one probe); the bench
+#: 65 / 38 / 17 / 11 (the earlier probe-only path: exactly these shifted by one probe); the bench
 #: case: 1 geometry of 65,536 after the Taylor proof, none after one probe
 FAST_EXTRA_ROUNDS = 5
 #: the fast path proves its PLs within this of the root (tighter than ``PL_TOLERANCE_M``, which
@@ -762,15 +762,15 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     ``start``: the starting point, max_j mean_j + sd_j ``_fast_start_factor``_j (about the
     largest single-term root), when the caller has it. ``ignore``: elements whose result the
     caller discards (they never trigger the loop or the bracketed branch). Measured on the 9
-    GPS + 4 SOP bench case: every element proved by the Taylor step; stop 16's three
-    evaluations (two Halley steps, then a probe) took 4-5 % more of the whole kernel.
+    GPS + 4 SOP bench case: every element proved by the Taylor step; three evaluations (two
+    Halley steps, then a probe, as an earlier version did) took 4-5 % more of the whole kernel.
     """
     coef = jnp.broadcast_to(coef, mean.shape)
     if start is None:
         k = _fast_start_factor(coef, rhs)
         start = jnp.max(jnp.where(k > -jnp.inf, mean + sd * k, -jnp.inf), axis=0)
     inv_sd = 1.0 / sd
-    cw = coef * inv_sd  # (not stored: stop 17, note above ``_blocks``)
+    cw = coef * inv_sd  # (not stored: note above ``_blocks``)
     cw2 = cw * inv_sd
     z_rhs = jnp.sqrt(-2.0 * jnp.log(rhs))
     x1 = _halley_step(start, *_risk_curvature(start, coef, mean, inv_sd, cw, cw2), z_rhs)
@@ -934,7 +934,8 @@ def _pls_from_projection(pr, budget, iterations):
     # east and north share the right-hand side: the start factor (Q^-1 per term) once for both,
     # ln coef once for all three
     log_coef = jnp.log(jnp.where(coef[:, 0] > 0, coef[:, 0], 1.0))
-    k = [_fast_start_factor(coef[:, 0], r, log_coef) for r in rhs_hv]  # (not stored: stop 17)
+    # (not stored: note above ``_blocks``)
+    k = [_fast_start_factor(coef[:, 0], r, log_coef) for r in rhs_hv]
     mean = pr.threshold + pr.bias
     start = jnp.stack([_max(jnp.where(kq > -jnp.inf, mean[:, q] + pr.sigma[:, q] * kq,
                                       -jnp.inf), 0) for q, kq in enumerate((k[0], k[0], k[1]))])
@@ -1077,8 +1078,8 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True):
     """ValueError naming the first argument out of range at a valid source. Fast path: the
     minimum and maximum over every source, valid or not (two passes without temporaries); the
     masked elementwise test only when that fails, to find a valid offender and its value.
-    Measured 2026-12-02, bench batch (65,536 x 13): 2.0 ms against 3.3 ms for the masked
-    test alone."""
+    Measured on the bench batch (65,536 x 13): 2.0 ms against 3.3 ms for the masked test
+    alone."""
     pc = np.asarray(p_const)
     if not np.all((pc >= 0) & (pc < 1)):
         raise ValueError("p_const must lie in [0, 1), got "
@@ -1136,7 +1137,7 @@ def _tails_flat(valid, constellation, p_sat, p_const, r_max):
 def _worst_tails(valid, constellation, p_sat, p_const, r_max):
     """The batch's largest ``_tails_flat`` per order, (r_max,): one compiled program in chunks
     (evaluated op by op on the host it was ~46 ms of a ~125 ms call at the bench batch of
-    65,536, measured 2026-12-02)."""
+    65,536, measured)."""
     batch = valid.shape[:-1]
     tails = map_chunks(functools.partial(_tails_flat, r_max=r_max),
                        (valid, constellation, p_sat, p_const), batch, chunk=16 * CHUNK)

@@ -87,7 +87,7 @@ def _slopes_kernel(g, sigma_m, valid):
 
 
 #: geometries per chunk of the public ``slopes`` and ``slope_hpl`` (``araim.batching.map_chunks``).
-#: Measured 2026-12-02, M + N = 9, batch 262,144, 2 cores, one call (XLA spreads it), 3 rounds
+#: Measured with M + N = 9, batch 262,144, 2 cores, one call (XLA spreads it), 3 rounds
 #: of best of 3: unchunked 3.0-3.1M HPL/s; chunks of 1024 / 2048 / 4096 / 8192 / 16384: 3.5M /
 #: 4.0M / 4.5-4.7M / 4.7-4.9M / 5.0-5.1M (two host threads over 4096-16384 chunks: 3.8-4.2M,
 #: slower). Chunks of >= 4096 gave HPLs bit-identical to the unchunked call there; 1024 and 2048

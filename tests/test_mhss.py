@@ -911,7 +911,7 @@ def test_bench_case_is_proved_by_the_taylor_step():
     the Taylor proof of the two Halley steps alone settles the PL equations, so the probe loop
     and the bracketed branch stay idle in (almost) every chunk. With both disabled (no probe
     round, bracketed solver returning NaN), at most 1 of 4096 geometries is NOT_CONVERGED
-    (measured 2026-12-02: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
+    (measured: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
     from oaraim.araim import mhss
     from oaraim.studies.bench import mhss_bench_inputs
 
@@ -983,7 +983,7 @@ def test_kernel_compiler_options_change_no_bit():
     """araim.batching.KERNEL_COMPILER_OPTIONS (512-bit vectors) change speed only: the kernel
     compiled with them gives exactly the bits of XLA's default options (the bench case, at the
     shape and seed of the threaded test above, whose compiled kernel it reuses). Checked once
-    beyond this (2026-12-02): the 2000 random geometries of ``random_cases`` at orders 1, 2 and
+    beyond this: the 2000 random geometries of ``random_cases`` at orders 1, 2 and
     3 (whole, single and generic modes) and the FDE functions, all bit-identical."""
     from oaraim.araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
     from oaraim.araim.mhss import _protection_levels, prepare_inputs, protection_levels_threaded
