@@ -290,8 +290,8 @@ def test_lpv200_budget_matches_oracle(lpv_batch):
 
 
 def test_pl_root_finder_converges_where_the_oracle_is_ok(random_batch, order1_batch, lpv_batch):
-    """A fixed iteration count must still converge (status OK) wherever the PL exists (before
-    150967f: 75/2000 NOT_CONVERGED with 8 Illinois iterations, 244/2000 with 7)."""
+    """A fixed iteration count must still converge (status OK) wherever the PL exists (an
+    Illinois solver with 8 iterations left 75/2000 NOT_CONVERGED, with 7 244/2000)."""
     detail = []
     for name, (_, info, res, oracle) in (("table I", random_batch), ("order 1", order1_batch),
                                         ("LPV-200", lpv_batch)):
@@ -481,7 +481,8 @@ def test_padding_invariance_nan_and_inf_rows(random_batch, perm_seed):
     solver tolerance 1e-3 m. Not bit-identical: another L is another compiled program (other
     reduction lengths and orders: rounding differs), and the fixed-count root finder returns a
     bracket end anywhere within 1e-3 m above the root, so a rounding-level change of its inputs
-    can move it inside that band (up to ~2e-5 m seen at 68fa2a9); most PLs agree to 1e-9 m."""
+    can move it inside that band (up to ~2e-5 m seen with an earlier solver); most PLs agree to
+    1e-9 m."""
     case, _, base, _ = random_batch
     out = run_jax(_pad_with_junk(case, 4, perm_seed))
     assert_no_nan(out)
