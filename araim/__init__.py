@@ -4,6 +4,10 @@ ARAIM / OARAIM multiple-hypothesis solution-separation protection levels with FD
 Pure JAX functions, batch first, float64. Failures are data: ``inf`` with a ``Status``.
 """
 
+if __name__ != "oaraim.araim":  # the source folder is importable from the checkout's root
+    raise ImportError(f"import oaraim.araim, not {__name__}: the folder araim/ installs as "
+                      "oaraim.araim (pip install -e .), which also enables JAX's float64 mode")
+
 from oaraim.araim import error_models
 from oaraim.araim.budget import BUDGET_LPV200, BUDGET_SEED004_TABLE_I, IntegrityBudget
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table, noncentrality

@@ -4,6 +4,10 @@ GPS time, broadcast ephemerides, almanacs, nominal constellations and the sky of
 Everything here is a pure JAX function on arrays, batch first, float64.
 """
 
+if __name__ != "oaraim.geometry":  # the source folder is importable from the checkout's root
+    raise ImportError(f"import oaraim.geometry, not {__name__}: the folder geometry/ installs as "
+                      "oaraim.geometry (pip install -e .), which also enables JAX's float64 mode")
+
 from oaraim.geometry import gpstime
 from oaraim.geometry.almanac import Almanac, AlmanacFileError, read_sem, read_yuma
 from oaraim.geometry.ephemeris import (

@@ -1,6 +1,10 @@
 """How many epochs are run: keys, chunked vmapped execution, streaming reductions, storage,
 resumable and distributable parameter sweeps (``mc.sweep``)."""
 
+if __name__ != "oaraim.mc":  # the source folder is importable from the checkout's root
+    raise ImportError(f"import oaraim.mc, not {__name__}: the folder mc/ installs as "
+                      "oaraim.mc (pip install -e .), which also enables JAX's float64 mode")
+
 from oaraim.mc.keys import realization_keys
 from oaraim.mc.reduce import BLOCK, EmpiricalCDF, Histogram, Mean
 from oaraim.mc.runner import ChunkPlan, run_chunked

@@ -1,2 +1,6 @@
 """One module per paper figure or experiment, the CLI, plotting and the reproduction report."""
 
+if __name__ != "oaraim.studies":  # the source folder is importable from the checkout's root
+    raise ImportError(f"import oaraim.studies, not {__name__}: the folder studies/ installs as "
+                      "oaraim.studies (pip install -e .), which also enables JAX's float64 mode")
+

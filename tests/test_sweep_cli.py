@@ -69,9 +69,10 @@ class ToySweep(SweepStudy):
 
 
 TOY = ToySweep()
-BOOT = ("import studies.registry as r, tests.test_sweep_cli as t; r.STUDIES[t.TOY.name] = t.TOY; "
+BOOT = ("import oaraim.studies.registry as r, tests.test_sweep_cli as t; "
+        "r.STUDIES[t.TOY.name] = t.TOY; "
         "import atexit, sys; atexit.register(lambda: print('distributed imported:', "
-        "'distributed' in sys.modules)); from studies.cli import main; main()")
+        "'distributed' in sys.modules)); from oaraim.studies.cli import main; main()")
 
 
 @pytest.fixture
