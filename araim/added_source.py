@@ -15,6 +15,7 @@ linear in (cos el, sin el), so u(el) is a combination of three solves done once 
 
 import jax
 import jax.numpy as jnp
+
 from oaraim.araim import linalg
 from oaraim.araim.slopes import REDUNDANCY_TOLERANCE, masked_geometry
 

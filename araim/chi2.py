@@ -13,8 +13,9 @@ of thresholds and protection radius using chi-square methods"; Walter & Enge 199
 from functools import lru_cache
 
 import numpy as np
-from oaraim.araim.validate import check_int, check_probability
 from scipy import optimize, stats
+
+from oaraim.araim.validate import check_int, check_probability
 
 
 def detection_threshold(p_fa: float, dof: int) -> float:

@@ -46,6 +46,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
 from oaraim.geometry.clocks import S_WDT_OCXO_S, S_WDTDOT_OCXO_PER_S, clock_transition
 from oaraim.geometry.frames import C_M_S
 

@@ -37,6 +37,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status

@@ -50,6 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
+
 from oaraim.araim import ekf as _ekf
 from oaraim.araim import ekf_raim as _er
 from oaraim.geometry import clocks, imu, recording, trajectory

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
 from oaraim.araim import linalg
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import IntegrityBudget

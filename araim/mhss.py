@@ -42,6 +42,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import erfc, ndtri
+from scipy import special
+
 from oaraim.araim import linalg
 from oaraim.araim.batching import CHUNK, jit_kernel, map_chunks, map_threads, slice_rows
 from oaraim.araim.budget import IntegrityBudget
@@ -53,7 +55,6 @@ from oaraim.araim.fault_modes import (
 )
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
-from scipy import special
 
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3

@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
 from oaraim.araim import linalg
 from oaraim.araim.batching import map_chunks
 from oaraim.araim.chi2 import lambda_det_table

@@ -45,6 +45,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.araim import linalg
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table

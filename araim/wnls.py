@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
 from oaraim.araim.linalg import inverse_variance_weights
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_sigma

@@ -22,6 +22,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.geometry import gpstime
 from oaraim.geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
 from oaraim.geometry.kepler import (

@@ -23,6 +23,7 @@ surface meteorology). ``saastamoinen_zhd_m`` (Saastamoinen 1972, in the form of 
 """
 
 import jax.numpy as jnp
+
 from oaraim.geometry.frames import C_M_S
 
 SEMICIRCLE_RAD = jnp.pi

@@ -33,6 +33,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.geometry import gpstime
 from oaraim.geometry.kepler import (
     F_GAL_S_SQRT_M,

@@ -31,6 +31,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 import pandas as pd
+
 from oaraim.geometry import frames, gpstime
 from oaraim.geometry.recording import (
     FORMAT_NAME,

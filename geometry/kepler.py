@@ -18,6 +18,7 @@ parameters per (epoch, satellite) and pass arrays of equal shape.
 from typing import NamedTuple
 
 import jax.numpy as jnp
+
 from oaraim.geometry.frames import OMEGA_E_GNSS_RAD_S
 
 #: GPS value of the Earth's gravitational constant, m^3/s^2 (IS-GPS-200 Table 20-IV)

@@ -24,6 +24,7 @@ satellite), so they share the almanac propagation and ``sat_position_ecef`` sign
 import functools
 
 import numpy as np
+
 from oaraim.geometry import gpstime
 from oaraim.geometry.almanac import Almanac, AlmanacRecords
 from oaraim.geometry.ephemeris import GALILEO, GPS

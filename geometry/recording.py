@@ -113,6 +113,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
+
 from oaraim.geometry import frames
 
 FORMAT_NAME = "oaraim-recording"

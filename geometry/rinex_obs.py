@@ -39,6 +39,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.geometry import atmosphere, gpstime
 from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation, open_rinex_text
 from oaraim.geometry.frames import (

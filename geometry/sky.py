@@ -21,6 +21,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.geometry.almanac import Almanac, read_sem, read_yuma
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
 from oaraim.geometry.frames import ecef_to_geodetic, enu_rotation

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import jax
 import numpy as np
+
 from oaraim.mc.keys import realization_keys
 from oaraim.mc.reduce import BLOCK
 

@@ -57,6 +57,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import xarray as xr
+
 from oaraim.mc.keys import MAX_REALIZATIONS, realization_keys
 from oaraim.mc.reduce import BLOCK
 from oaraim.mc.runner import DEFAULT_CHUNK

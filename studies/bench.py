@@ -13,10 +13,10 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import _slope_hpl_chunked
 
 from oaraim import geometry, reference, reference_mhss
+from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.slopes import _slope_hpl_chunked
 
 
 def host_info() -> dict:
@@ -119,9 +119,8 @@ def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_so
 
 def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/."""
-    from oaraim.araim.batching import default_threads
-
     from oaraim import araim
+    from oaraim.araim.batching import default_threads
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -177,11 +176,10 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
 def profile_mhss(batch=65_536, repeats=3):
     """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding, in CPU
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
+    from oaraim import araim
     from oaraim.araim.batching import jit_kernel, map_chunks
     from oaraim.araim.fault_modes import fault_modes_batch_last
     from oaraim.araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
-
-    from oaraim import araim
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I

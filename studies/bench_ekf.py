@@ -12,6 +12,7 @@ import time
 
 import jax
 import numpy as np
+
 from oaraim.araim import ekf_raim
 from oaraim.geometry import trajectory
 

@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+
+from oaraim import araim, data, geometry
 from oaraim.araim import snapshot
 from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
 from oaraim.araim.mhss import required_order
@@ -54,8 +56,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-
-from oaraim import araim, data, geometry
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"

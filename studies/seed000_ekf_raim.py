@@ -36,6 +36,8 @@ from pathlib import Path
 import jax
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry, mc
 from oaraim.araim import ekf_raim, ekf_replay
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -49,8 +51,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-
-from oaraim import geometry, mc
 
 #: runs per call of the vmapped drive kernel: one compiled shape, whatever the chunk
 MC_BATCH = 16

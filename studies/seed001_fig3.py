@@ -14,11 +14,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry
 from oaraim.araim.added_source import added_source_slope_max
 from oaraim.mc import Histogram, run_chunked
 from oaraim.studies.base import Param, Study, StudyResult, count, in_range, positive
-
-from oaraim import geometry
 
 
 def draw(key, n_gps, mask_rad):

@@ -21,6 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry
 from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.slopes import _slopes_kernel
 from oaraim.mc import EmpiricalCDF, Mean, run_chunked
@@ -35,8 +37,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-
-from oaraim import geometry
 
 HPL_GRID_M = np.round(np.arange(0.0, 500.0 + 1e-9, 0.01), 2)
 

@@ -29,6 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import data, geometry
 from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.slopes import _slope_hpl_jit
 from oaraim.geometry import gpstime
@@ -43,8 +45,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-
-from oaraim import data, geometry
 
 MDSCC_ECEF_M = (4849210.0, -360329.7, 4114920.0)  # DESIGN.md: seed 001 with y corrected
 VILL_FILE = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"

@@ -28,6 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry
 from oaraim.araim import snapshot
 from oaraim.araim.error_models import gnss_variances
 from oaraim.geometry import gnss_scenario, gpstime
@@ -44,8 +46,6 @@ from oaraim.studies.base import (
     probability,
 )
 from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
-
-from oaraim import geometry
 
 PUBLISHED_HPL_GPS_M = 15.01
 PUBLISHED_HPL_SOP_M = 8.29

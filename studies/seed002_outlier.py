@@ -10,9 +10,8 @@ we keep seed 000's tower 1 and our 30 m NLOS choice). Published: 2D RMSE 8.2 -> 
 maximum 2D error 20.4 -> 11.6 m (43.3 %).
 """
 
-from oaraim.studies.seed000_ekf_raim import EkfDriveStudy
-
 from oaraim import geometry
+from oaraim.studies.seed000_ekf_raim import EkfDriveStudy
 
 
 class Seed002Outlier(EkfDriveStudy):

@@ -34,6 +34,8 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from oaraim import geometry
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.mhss import _protection_levels, required_order
@@ -48,8 +50,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-
-from oaraim import geometry
 
 #: seed 004 section VI, ECEF metres
 ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)

@@ -24,6 +24,7 @@ has the all-in-view position and contributes nothing at these PLs.
 
 import numpy as np
 import xarray as xr
+
 from oaraim.mc.sweep import Count, Mean, Min
 from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, positive, probability

@@ -31,12 +31,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
 from oaraim.mc.sweep import Count, Mean
 from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive, probability
-
-from oaraim import geometry
 
 #: a reduction is "positive"/"negative" beyond twice the 1e-3 m PL solver tolerance
 TOL_M = 2e-3

@@ -30,6 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fde import _separation
@@ -37,8 +39,6 @@ from oaraim.araim.status import Status
 from oaraim.mc.sweep import Count, Max, Mean, Min
 from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count
-
-from oaraim import geometry
 
 RAISE_TOL_M = 2e-3
 #: "unchanged" separations: both sides are S y from different factorizations of the same

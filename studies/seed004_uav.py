@@ -46,6 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+
+from oaraim import araim, geometry
 from oaraim.araim import snapshot
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
@@ -66,8 +68,6 @@ from oaraim.studies.base import (
     probability,
 )
 from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
-
-from oaraim import araim, geometry
 
 PUBLISHED_EPOCHS = 2880
 FLIGHT_S = 220.0

@@ -7,6 +7,7 @@ import threading
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from oaraim.araim.batching import map_chunks, map_threads, slice_rows
 
 CHUNK = 8

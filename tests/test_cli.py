@@ -1,8 +1,9 @@
 """The oaraim command line as a user meets it: errors exit 2 with one line, no traceback."""
 
 import pytest
-from oaraim.studies.cli import app
 from typer.testing import CliRunner
+
+from oaraim.studies.cli import app
 
 runner = CliRunner()
 

@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from oaraim.studies.base import Study, StudyResult
-from oaraim.studies.cli import app
-from oaraim.studies.registry import STUDIES
 from typer.testing import CliRunner
 
 from oaraim import data
+from oaraim.studies.base import Study, StudyResult
+from oaraim.studies.cli import app
+from oaraim.studies.registry import STUDIES
 
 SMALL = "almanac/almmops.txt"
 runner = CliRunner()

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from oaraim.studies.bench import TABLE_BEGIN, TABLE_END, markdown_table
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -4,12 +4,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy import stats
+from scipy.linalg import expm
+
 from oaraim.araim import ekf, ekf_raim
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
 from oaraim.geometry import imu, trajectory
-from scipy import stats
-from scipy.linalg import expm
 
 # ----------------------------------------------------------------------------------------
 # A plain linear Kalman filter in NumPy (the reference)

@@ -4,11 +4,11 @@ import gzip
 
 import numpy as np
 import pytest
+
+from oaraim import geometry
 from oaraim.geometry import gpstime
 from oaraim.geometry.ephemeris import check_navigation_file
 from oaraim.geometry.kepler import OrbitElements, orbit_ecef
-
-from oaraim import geometry
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 import pytest
+
 from oaraim.araim import error_models as em
 
 F0 = 10.23e6

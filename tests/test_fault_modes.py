@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
-from oaraim.araim.fault_modes import fault_modes as _fault_modes_eager
 
 from oaraim import araim
 from oaraim import reference_mhss as ref
+from oaraim.araim import Status
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fault_modes import fault_modes as _fault_modes_eager
 from tests.test_mhss import random_cases
 
 P_THRESH = 6e-8  # Table I

@@ -12,11 +12,11 @@ random set of test_mhss.py for the separation-vs-oracle test.
 import jax
 import numpy as np
 import pytest
-from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
 
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
+from oaraim.araim import Status
+from oaraim.araim.error_models import gnss_variances, sop_variances
 from tests.test_mhss import random_cases
 
 L_GPS, L_SOP = 12, 6

@@ -6,11 +6,11 @@ import jax
 import numpy as np
 import pytest
 import xarray as xr
+
+from oaraim import mc
 from oaraim.mc.keys import realization_keys
 from oaraim.mc.reduce import BLOCK, EmpiricalCDF, Histogram, Mean
 from oaraim.mc.runner import ChunkPlan, run_chunked
-
-from oaraim import mc
 
 
 def _key_data(keys):

@@ -17,12 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from scipy import optimize, special, stats
 
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
+from oaraim.araim import Status
+from oaraim.araim.error_models import gnss_variances, sop_variances
 
 L_GPS, L_GAL, L_SOP = 12, 8, 8
 L = L_GPS + L_GAL + L_SOP

@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from oaraim.geometry import recording as R
-from oaraim.geometry.recording import RecordingError
 
 from oaraim import geometry
+from oaraim.geometry import recording as R
+from oaraim.geometry.recording import RecordingError
 
 
 @pytest.fixture(scope="module")

@@ -5,12 +5,12 @@ under OARAIM_REQUIRE_DATA=1)."""
 
 import numpy as np
 import pytest
+
+from oaraim import araim, geometry
 from oaraim.geometry import rinex_obs
 from oaraim.geometry.frames import C_M_S
 from oaraim.studies import rinex_replay
 from oaraim.studies.registry import STUDIES
-
-from oaraim import araim, geometry
 
 STATIONS = ("07590920", "30400920")
 

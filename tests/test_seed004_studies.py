@@ -8,11 +8,11 @@ checkable helpers, and the paper's statements at reduced size.
 import jax
 import numpy as np
 import pytest
+
+from oaraim import araim, geometry, mc
 from oaraim.studies import seed004_common as c
 from oaraim.studies.registry import STUDIES
 from oaraim.studies.seed004_fig4 import Fig4Cell, largest_reducing_sigma, monotone_share
-
-from oaraim import araim, geometry, mc
 
 
 def test_receiver_is_orange_county():

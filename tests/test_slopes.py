@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from oaraim.araim import Status
 
 from oaraim import araim, geometry
+from oaraim.araim import Status
 from oaraim.reference import lambda_det_reference, slope_hpl_reference, slopes_reference
 
 L_BIG = 18  # 12 satellites + 6 towers at most

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 import pytest
+
+from oaraim import araim, geometry
 from oaraim.araim import snapshot
 from oaraim.geometry import atmosphere
 from oaraim.geometry.frames import C_M_S
-
-from oaraim import araim, geometry
 
 # --------------------------------------------------------------------------- Klobuchar
 

@@ -3,15 +3,15 @@ recording round trip of the synthesis (geometry.gnss_scenario)."""
 
 import numpy as np
 import pytest
+
+from oaraim import geometry
 from oaraim.geometry import gnss_scenario
 from oaraim.studies.registry import STUDIES
 from oaraim.studies.seed004_uav import synthesize
 
-from oaraim import geometry
-
 
 @pytest.fixture(scope="module")
-def uav():
+def uav(shared_data):  # the default sky is the real broadcast file (nav=auto)
     study = STUDIES["seed004-uav"]
     p = study.validate({"n_epochs": "2880", "exclusion": "false", "fault_onset_s": "4",
                         "fault_ramp_mps": "2"})
@@ -55,7 +55,7 @@ def test_uav_gps_fault_detected_and_theorem1(uav):
     assert m["detection_delay_noise_free_s"] == t_sop - t_gps
 
 
-def test_vehicle_small_run():
+def test_vehicle_small_run(shared_data):
     study = STUDIES["seed001-vehicle"]
     res = study.run(study.validate({"duration_s": "3"}), 3, 0, None)
     ds = res.dataset
@@ -65,7 +65,7 @@ def test_vehicle_small_run():
     assert res.rows[2]["published"] == 44.77 and 0 < res.rows[2]["reproduced"] < 100
 
 
-def test_recording_round_trip_replays_identically(tmp_path):
+def test_recording_round_trip_replays_identically(tmp_path, shared_data):
     """Synthesized flight -> recording folder -> load -> same replay inputs; the study run on
     the recording equals the synthesized run."""
     study = STUDIES["seed004-uav"]

@@ -6,13 +6,13 @@ import jax
 import numpy as np
 import pytest
 import xarray as xr
+
+from oaraim import mc
+from oaraim.reference import slopes_reference
 from oaraim.studies import seed001_fig3, seed001_fig4
 from oaraim.studies.execute import run_study
 from oaraim.studies.registry import STUDIES
 from oaraim.studies.report import build_report
-
-from oaraim import mc
-from oaraim.reference import slopes_reference
 
 
 def test_fig3_kernel_matches_numpy_oracle_argmin():
@@ -160,6 +160,7 @@ def test_added_source_sweep_ignores_nan_padding():
     """The rank-one sweep masks padding rows like araim.slopes does: NaN/inf junk in invalid
     rows leaves every slope_max unchanged (bit for bit)."""
     import jax.numpy as jnp
+
     from oaraim.araim.added_source import added_source_slope_max
 
     keys = mc.realization_keys(2, 0, 0, 16)

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
+
 from oaraim.mc.keys import realization_keys
 from oaraim.mc.reduce import BLOCK
 from oaraim.mc.sweep import (

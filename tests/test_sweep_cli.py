@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from typer.testing import CliRunner
+
 from oaraim.mc.sweep import Count, Histogram, Max, Mean
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive
 from oaraim.studies.cli import app
 from oaraim.studies.execute import run_study
-from typer.testing import CliRunner
-
 from tests.test_sweep import EDGES, toy_factory
 
 ROOT = Path(__file__).resolve().parents[1]

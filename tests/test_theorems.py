@@ -19,12 +19,12 @@ the old system), C = 2.
 import jax
 import numpy as np
 import pytest
-from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from scipy import special
 
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
+from oaraim.araim import Status
+from oaraim.araim.error_models import gnss_variances, sop_variances
 
 N_GEOM = 1000  # issue 3: >= 1000 random geometries
 L = 13

@@ -4,10 +4,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.linalg import expm
+
 from oaraim.araim import ekf
 from oaraim.geometry import clocks, imu, trajectory
 from oaraim.geometry.frames import C_M_S
-from scipy.linalg import expm
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ times below any physically meaningful error. Compiled shapes are kept few: every
 
 import numpy as np
 import pytest
-from oaraim.araim import Status
 
 from oaraim import araim
+from oaraim.araim import Status
 from oaraim.reference import wnls_reference
 
 L = 12  # padded number of sources
