@@ -35,7 +35,7 @@ def sweep_kernel(study, params, coords):
 def _study_ref(study):
     """The study's name where every worker finds it in the registry, else the object."""
     registered = STUDIES.get(study.name) is study
-    return study.name if registered and type(study).__module__.startswith("studies.") else study
+    return study.name if registered and type(study).__module__.startswith("oaraim.studies.") else study
 
 
 def sweep_fingerprint(study, params, realizations, seed):

@@ -210,3 +210,13 @@ def test_sweep_study_run_works_without_an_output_folder(toy):
     """SweepStudy.run (tests, notebooks) runs in-process in a temporary folder."""
     res = TOY.run(TOY.validate({"a": "2"}), 1024, 0)
     assert res.dataset["r_mean"].shape == (1, 2) and res.metrics["cells"] == 2
+
+
+def test_registered_studies_travel_to_workers_by_name(toy):
+    """A registered study of the package reaches Dask workers as its name (looked up there),
+    a study defined elsewhere (the toy) as the pickled object."""
+    from oaraim.studies.execute import _study_ref
+    from oaraim.studies.registry import STUDIES
+
+    assert _study_ref(STUDIES["seed004-fig4-hpl-maps"]) == "seed004-fig4-hpl-maps"
+    assert _study_ref(toy) is toy
