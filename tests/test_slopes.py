@@ -226,7 +226,7 @@ def test_chunked_batch_equals_the_unchunked_kernel():
     failures included, and a nested batch shape comes back."""
     import importlib
 
-    slopes_mod = importlib.import_module("araim.slopes")
+    slopes_mod = importlib.import_module("oaraim.araim.slopes")
     n = 2 * slopes_mod.SLOPE_CHUNK + 5
     g, sigma, valid = _random_geometries(11, n)
     valid[::97] = False  # too few sources: inf with a status
