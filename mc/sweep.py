@@ -58,7 +58,7 @@ import jax
 import numpy as np
 import xarray as xr
 
-from oaraim.mc.keys import MAX_REALIZATIONS, realization_keys
+from oaraim.mc.keys import MAX_REALIZATIONS, cell_key, realization_keys
 from oaraim.mc.reduce import BLOCK
 from oaraim.mc.runner import DEFAULT_CHUNK
 
@@ -334,7 +334,43 @@ class Count:
         return {f"{self.name}_count": np.int64(state["count"][0])}
 
 
-REDUCERS = (Mean, Max, Min, Histogram, Count)
+@dataclass(frozen=True)
+class Values:
+    """Every realization's value of output ``name``, kept (not reduced): ``{name}`` with the
+    extra dimension ``dim`` of length ``n`` (the sweep's realizations). For deterministic grids
+    whose realizations are not samples but elements (e.g. longitude x epoch of an availability
+    map, ``index_kernel``). Stored with ``dtype``; realizations past ``n`` are not kept. NaN in
+    a float output raises (a bug upstream, DESIGN.md); infinities are data."""
+
+    name: str
+    n: int
+    dtype: str = "float64"
+    dim: str = "realization"
+
+    def inputs(self):
+        return (self.name,)
+
+    def variables(self):
+        return {self.name: (self.dim,)}
+
+    def partial(self, out, valid, nblocks, ctx):
+        v = _output(out, self.name, valid.size, ctx)
+        if np.issubdtype(v.dtype, np.floating):
+            _check_no_nan(self.name, v, valid, ctx)
+        return {"values": np.where(valid, v, np.zeros((), v.dtype)).astype(self.dtype)}
+
+    def empty(self, n_blocks):
+        return {"values": np.zeros(n_blocks * BLOCK, self.dtype)}
+
+    def accumulate(self, state, part, b0):
+        v = part["values"]
+        state["values"][b0 * BLOCK:b0 * BLOCK + v.size] = v
+
+    def finish(self, state):
+        return {self.name: state["values"][:self.n].copy()}
+
+
+REDUCERS = (Mean, Max, Min, Histogram, Count, Values)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -360,6 +396,11 @@ def _worker_kernel(kernel_factory, factory_id, coords):
 def kernel_outputs(kernel, key_id, seed, start, n, batch_size):
     """Outputs of realizations ``start .. start + n - 1`` of one cell, NumPy, each ``(n,)``.
 
+    A kernel with the attribute ``index_kernel = True`` is called as ``kernel(indices, key)``
+    with the realization indices ``(batch_size,)`` (int64) and the cell's key
+    (``mc.keys.cell_key``) instead of one key per realization: for grids whose realizations are
+    elements (longitude x epoch) and whose randomness, if any, is not per realization.
+
     The kernel is called with exactly ``batch_size`` keys per call, on batches aligned to
     multiples of ``batch_size`` in realization index (the first and last may reach outside the
     range and are trimmed). So realization i is always computed by the same compiled program at
@@ -369,8 +410,13 @@ def kernel_outputs(kernel, key_id, seed, start, n, batch_size):
     """
     first = (start // batch_size) * batch_size
     parts = []
+    base = cell_key(seed, key_id) if getattr(kernel, "index_kernel", False) else None
     for s in range(first, start + n, batch_size):
-        out = jax.device_get(kernel(realization_keys(seed, key_id, s, batch_size)))
+        if base is None:
+            out = kernel(realization_keys(seed, key_id, s, batch_size))
+        else:  # a deterministic grid: realization indices and the cell's key
+            out = kernel(np.arange(s, s + batch_size, dtype=np.int64), base)
+        out = jax.device_get(out)
         for name, v in out.items():
             v = np.asarray(v)
             if v.ndim < 1 or v.shape[0] != batch_size:

@@ -22,6 +22,7 @@ from oaraim.mc.sweep import (
     Max,
     Mean,
     Min,
+    Values,
     cell_key_id,
     run_sweep,
 )
@@ -359,3 +360,40 @@ def test_axis_values_are_checked():
 def test_missing_kernel_output_is_named(tmp_path):
     with pytest.raises(KeyError, match="'nope'.*r_inf"):
         _run(tmp_path, reducers=(Mean("nope"),))
+
+
+class _IndexKernel:
+    """An index kernel (realization i of cell a is the element i of a deterministic grid):
+    returns 10 a + i and the first word of the cell's key."""
+
+    index_kernel = True
+
+    def __init__(self, coords):
+        self.a = int(coords["a"])
+
+    def __call__(self, idx, key):
+        word = jax.random.key_data(key).ravel()[-1].astype(jnp.int64)
+        return {"v": 10.0 * self.a + jnp.asarray(idx, jnp.float64),
+                "k": jnp.full(idx.shape, word), "even": idx % 2 == 0}
+
+
+def test_index_kernel_and_values_keep_every_realization_for_any_chunking(tmp_path):
+    """Values keeps realization i of each cell at position i (whatever the chunk), an index
+    kernel sees the indices and its cell's key (mc.keys.cell_key of the key-axis id)."""
+    from oaraim.mc.keys import cell_key
+
+    n = 2500  # three blocks, the last one partial
+    axes = (Axis("a", (1, 2)),)
+    red = (Values("v", n), Values("k", n, "int64"), Values("even", n, "bool"), Mean("v"))
+    runs = [run_sweep(_IndexKernel, axes, n, red, seed=7, key_axes=("a",),
+                      out_dir=tmp_path / f"c{c}", fingerprint={"i": 1}, chunk_size=c,
+                      progress=False).dataset for c in (1024, 3072)]
+    for ds in runs:
+        assert ds["v"].dims == ("a", "realization")
+        np.testing.assert_array_equal(ds["v"].values, [10.0 + np.arange(n), 20.0 + np.arange(n)])
+        np.testing.assert_array_equal(ds["even"].values[0], np.arange(n) % 2 == 0)
+        for i, a in enumerate((1, 2)):
+            want = np.asarray(jax.random.key_data(cell_key(7, cell_key_id({"a": a}, ("a",)))))
+            assert np.all(ds["k"].values[i] == want.ravel()[-1].astype(np.int64))
+        assert ds["v_mean"].values[0] == np.mean(10.0 + np.arange(n))
+    xr.testing.assert_identical(runs[0], runs[1])
