@@ -11,6 +11,11 @@ needs the six numbers. Presets:
   Subgroup Airborne Algorithm Description Document (ADD) v2.0/v3.0, Table 1 of constants:
   PHMI_VERT = 9.8e-8, PHMI_HOR = 2e-9, P_FA_VERT = 3.9e-6, P_FA_HOR = 9e-8, P_THRES = 8e-8,
   P_EMT = 1e-5.
+- ``BUDGET_LPV200_MAAST``: the LPV-200 allocation of Stanford's MAAST for ARAIM
+  (``main_maast_araim.m`` of its 2018 release and of ``stanford-gps-lab/maast_for_araim_2``):
+  PHMI_VERT = 9.8e-8, PHMI_HOR = 2e-9, P_FA_VERT = 3.9e-6, P_FA_HOR = 9e-7, P_THRES = 6e-8,
+  P_EMT = 1e-5. It differs from the ADD table in P_FA_HOR (9e-7 against 9e-8) and P_THRES
+  (6e-8 against 8e-8).
 """
 
 from dataclasses import asdict, dataclass
@@ -53,3 +58,7 @@ BUDGET_SEED004_TABLE_I = IntegrityBudget(
 #: LPV-200 allocation of the ARAIM ADD (v2.0/v3.0, Table 1)
 BUDGET_LPV200 = IntegrityBudget(
     phmi_v=9.8e-8, phmi_h=2e-9, p_fa_v=3.9e-6, p_fa_h=9e-8, p_thresh=8e-8, p_emt=1e-5)
+
+#: LPV-200 allocation of MAAST for ARAIM (main_maast_araim.m, 2018 and 2024 releases)
+BUDGET_LPV200_MAAST = IntegrityBudget(
+    phmi_v=9.8e-8, phmi_h=2e-9, p_fa_v=3.9e-6, p_fa_h=9e-7, p_thresh=6e-8, p_emt=1e-5)

@@ -35,7 +35,8 @@ def sweep_kernel(study, params, coords):
 def _study_ref(study):
     """The study's name where every worker finds it in the registry, else the object."""
     registered = STUDIES.get(study.name) is study
-    return study.name if registered and type(study).__module__.startswith("oaraim.studies.") else study
+    in_package = type(study).__module__.startswith("oaraim.studies.")
+    return study.name if registered and in_package else study
 
 
 def sweep_fingerprint(study, params, realizations, seed):
@@ -83,6 +84,12 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
     study = get_study(name)
     _check_sweep_flags(study, resume, workers, scheduler)
     params = study.validate(parse_sets(sets))
+    fixed = study.fixed_realizations(params) if hasattr(study, "fixed_realizations") else None
+    if fixed is not None:
+        if realizations is not None and realizations != fixed:
+            raise ValueError(f"{study.name} sets its realizations from its grid ({fixed:,} per "
+                             "cell); drop --realizations and change the grid with --set")
+        realizations = fixed
     if realizations is None:
         realizations = study.quick_realizations if quick else study.default_realizations
     if realizations < 1:

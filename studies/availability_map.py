@@ -1,0 +1,710 @@
+"""Availability and coverage maps of ARAIM / OARAIM service levels, GNSS + optional SOPs.
+
+The job Stanford's MAAST does for ARAIM: a latitude x longitude grid of users (default the
+world at 10 x 10 deg), each at every epoch of a day (default 24 h at 300 s), skies from YUMA
+almanacs (MAAST's ``almmops.txt`` GPS and ``alm_gal_ed259.txt`` Galileo by default) or any
+navigation file, the MHSS protection levels of ``araim.protection_levels`` (seed 004 eqs.
+5-16, the ADD) and the service level's criteria (``araim.availability``). Outputs: the cube
+(lat, lon, time) of HPL, VPL, EMT, sigma_acc, status and availability in ``data.zarr``; maps of
+availability, 99.5-percentile VPL/HPL, and the coverage (area-weighted share of the grid with
+availability >= 99.5 %) in the summary.
+
+One realization is one (longitude, epoch) of a latitude row: each latitude is a sweep cell
+(``mc.sweep``, so the map is resumable and runs on Dask like every sweep), realization
+i = lon_index x n_epochs + epoch_index, computed by an index kernel (``mc.sweep.Values``
+keeps every value).
+
+Optional SOP towers per grid point, in SOP constellations labelled after GPS (0) and Galileo
+(1): a binomial point process (seed 001 section 3.3) of ``sops_per_km2`` x annulus area towers
+around each user, one SOP constellation, the same towers at every epoch of that user; or a
+tower CSV (columns lat_deg, lon_deg, height_m, carrier; one SOP constellation per carrier) of
+which the towers within [d_min_m, d_max_m] of a user are used (nearest first, at most
+``max_sops``).
+
+Conventions (MAAST / ADD defaults; each is a parameter): see ``MAAST_DEFAULTS``.
+"""
+
+import csv
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+
+from oaraim import data, geometry
+from oaraim.araim import availability as av
+from oaraim.araim.batching import jit_kernel
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.mhss import _protection_levels, required_order
+from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
+from oaraim.geometry.sky import resolve_source
+from oaraim.mc.sweep import Values
+from oaraim.studies import seed001_fig5 as fig5
+from oaraim.studies.base import (
+    Param,
+    StudyResult,
+    SweepStudy,
+    count,
+    in_range,
+    non_negative,
+    positive,
+    probability,
+)
+
+GPS_ALMANAC = "almanac/almmops.txt"
+GALILEO_ALMANAC = "almanac/alm_gal_ed259.txt"
+
+#: MAAST for ARAIM's defaults (``main_maast_araim.m`` of its 2018 release, ADD v3.0; the 2024
+#: release ``stanford-gps-lab/maast_for_araim_2`` switched to draft ICAO integrity support
+#: data, sigma_URA 2.4 m GPS / 6 m Galileo, b_nom 0): mask 5 deg for every constellation;
+#: ``ARAIM_URA_GPS = ARAIM_URA_GAL = 1`` m with ``ARAIM_URE = 2/3 ARAIM_URA``; b_nom 0.75 m for
+#: integrity (0 for accuracy); P_sat 1e-5; P_const 1e-8 GPS, 1e-4 Galileo; 24 h at 300 s (288
+#: epochs); users on a 10 x 10 deg grid, latitudes -90..80 and longitudes -180..170
+#: (``usrworld.dat`` as ``init_usrdata.m`` clips it), height 0. The error models are those of
+#: ``araim.error_models``: MAAST's dual-frequency GPS airborne curve and MOPS troposphere;
+#: MAAST gives Galileo its own airborne table (``af_cnmp_galileo``), we use the GPS curve.
+MAAST_DEFAULTS = {
+    "mask_deg": 5.0,
+    "sigma_ura_gps_m": 1.0, "sigma_ura_gal_m": 1.0,
+    "b_nom_gps_m": 0.75, "b_nom_gal_m": 0.75,
+    "p_sat_gps": 1e-5, "p_sat_gal": 1e-5,
+    "p_const_gps": 1e-8, "p_const_gal": 1e-4,
+    "lat_deg": "-90:80:10", "lon_deg": "-180:170:10", "duration_s": 86400.0, "step_s": 300.0,
+}
+
+STATUS_DTYPE = "int8"
+#: colour bands of the availability map (%), those of MAAST's availability contours
+AVAILABILITY_BANDS_PCT = (0.0, 50.0, 75.0, 85.0, 90.0, 95.0, 99.0, 99.5, 99.9, 100.0)
+
+
+# ------------------------------------------------------------------------------------ grids
+
+
+def parse_grid(lo, hi):
+    """A grid axis in degrees: ``START:STOP:STEP`` (STOP included when on the grid) or a
+    comma-separated list; values within [lo, hi], sorted, no duplicates."""
+
+    def parse(name, v):
+        if isinstance(v, list | tuple):
+            vals = [float(x) for x in v]
+        else:
+            s = str(v).strip()
+            try:
+                if ":" in s:
+                    a, b, step = (float(x) for x in s.split(":"))
+                    if step <= 0 or b < a:
+                        raise ValueError
+                    n = int(np.floor((b - a) / step + 1e-9)) + 1
+                    vals = [round(a + k * step, 9) for k in range(n)]
+                else:
+                    vals = [float(x) for x in s.split(",")]
+            except ValueError:
+                raise ValueError(f"{name} takes START:STOP:STEP (e.g. -90:90:10) or a comma "
+                                 f"list of degrees, got {v!r}") from None
+        if not vals or any(not (lo <= x <= hi) for x in vals):
+            raise ValueError(f"{name} values must lie in [{lo}, {hi}] deg, got {v!r}")
+        if len(set(vals)) != len(vals):
+            raise ValueError(f"{name} lists a value twice: {v!r}")
+        return tuple(sorted(vals))
+
+    return parse
+
+
+def parse_orbits(default_file):
+    """'auto' (``default_file`` from the data registry, fetched if missing), 'nominal' (the
+    built-in constellation), 'none', or a YUMA / SEM almanac or RINEX navigation file."""
+
+    def parse(name, v):
+        s = str(v).strip()
+        if s in ("auto", "nominal", "none"):
+            return s
+        p = Path(s).expanduser()
+        if not p.is_file():
+            raise ValueError(f"{name} must be 'auto' ({default_file}), 'nominal', 'none' or an "
+                             f"existing almanac / navigation file, got {v!r} (not found)")
+        return str(p.resolve())
+
+    return parse
+
+
+def parse_limit(name, v):
+    """'preset' (the service level's value), 'none' (not applied) or metres > 0."""
+    s = str(v).strip()
+    if s in ("preset", "none"):
+        return s
+    return positive(name, s)
+
+
+def parse_target(name, v):
+    s = str(v).strip()
+    return s if s == "preset" else in_range(1e-9, 1.0)(name, s)
+
+
+def parse_towers(name, v):
+    s = str(v).strip()
+    if s == "none":
+        return s
+    p = Path(s).expanduser()
+    if not p.is_file():
+        raise ValueError(f"{name} must be 'none' or a CSV file with columns lat_deg, lon_deg, "
+                         f"height_m, carrier; got {v!r} (not found)")
+    read_towers(p)  # checked now, before any computation
+    return str(p.resolve())
+
+
+def read_towers(path):
+    """Towers of a CSV (lat_deg, lon_deg, height_m, carrier): arrays and the carrier names
+    (sorted; carrier k becomes SOP constellation 2 + k)."""
+    need = ("lat_deg", "lon_deg", "height_m", "carrier")
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows or any(c not in rows[0] for c in need):
+        raise ValueError(f"tower file {path}: needs a header with the columns "
+                         f"{', '.join(need)}; got {list(rows[0]) if rows else 'no rows'}")
+    lat, lon, h, car = [], [], [], []
+    for i, r in enumerate(rows, start=2):
+        try:
+            la, lo, hh = float(r["lat_deg"]), float(r["lon_deg"]), float(r["height_m"])
+        except ValueError:
+            raise ValueError(f"tower file {path}, line {i}: lat_deg, lon_deg and height_m must "
+                             f"be numbers, got {r}") from None
+        if not (-90 <= la <= 90 and -180 <= lo <= 360 and -500 <= hh <= 9000):
+            raise ValueError(f"tower file {path}, line {i}: lat_deg in [-90, 90], lon_deg in "
+                             f"[-180, 360], height_m in [-500, 9000] m; got {r}")
+        if not r["carrier"].strip():
+            raise ValueError(f"tower file {path}, line {i}: empty carrier")
+        lat.append(la)
+        lon.append(lo)
+        h.append(hh)
+        car.append(r["carrier"].strip())
+    names = sorted(set(car))
+    return (np.array(lat), np.array(lon), np.array(h),
+            np.array([names.index(c) for c in car]), names)
+
+
+# ------------------------------------------------------------------------------------ skies
+
+
+def _orbit_source(choice, default_file, nominal):
+    if choice == "none":
+        return None
+    if choice == "nominal":
+        return nominal
+    if choice == "auto":
+        return str(data.path(default_file))
+    return choice
+
+
+@functools.lru_cache(maxsize=4)
+def constellation_orbits(gps, galileo, duration_s, step_s):
+    """Satellite ECEF ``(T, S, 3)``, usable mask ``(T, S)``, constellation codes ``(S,)``,
+    satellite names, epoch offsets ``(T,)`` (s from the start) and a description.
+
+    Each orbit source runs on its own clock from its own reference epoch: an almanac from its
+    earliest time of applicability (MAAST propagates each almanac from its own epoch), a
+    navigation file from 00:00 of the day holding most of its records. The offsets are the
+    epochs of the map: 0, step_s, ... < duration_s.
+    """
+    t_off = np.arange(0.0, duration_s - 1e-9, step_s)
+    parts, desc = [], []
+    for name, choice, default, nominal, code in (
+            ("gps", gps, GPS_ALMANAC, "nominal-gps", GPS),
+            ("galileo", galileo, GALILEO_ALMANAC, "nominal-galileo", GALILEO)):
+        src = _orbit_source(choice, default, nominal)
+        if src is None:
+            continue
+        objs, _, d = resolve_source(src, (name,))
+        for o in objs:
+            keep = np.asarray(o.constellation) == code
+            if not keep.any():
+                continue
+            if isinstance(o, Ephemeris):
+                t0 = fig5.file_day_start(o)
+            elif hasattr(o, "records"):
+                t0 = float(np.min(o.records.toa_s))
+            else:  # a nominal constellation: its own reference epoch
+                t0 = float(getattr(o, "reference_t_gps_s", 0.0))
+            e, v, sv = o.sat_position_ecef(t0 + t_off, prns=o.prns[keep])
+            parts.append((np.asarray(e), np.asarray(v), np.full(int(keep.sum()), code),
+                          np.asarray(sv)))
+        desc.append(f"{name}: {Path(src).name if src not in (nominal,) else src}")
+    if not parts:
+        raise ValueError("gps and galileo are both 'none': the map needs at least one "
+                         "constellation")
+    ecef = np.concatenate([p[0] for p in parts], 1)
+    ok = np.concatenate([p[1] for p in parts], 1)
+    cons = np.concatenate([p[2] for p in parts])
+    sv = np.concatenate([p[3] for p in parts])
+    return ecef, ok, cons, sv, t_off, "; ".join(desc)
+
+
+def look(lat_rad, lon_rad, h_m, sat_ecef_m, sat_ok, mask_rad):
+    """Az, el and validity ``(..., S)`` of satellites ``(..., S, 3)`` seen from geodetic
+    points ``(...)`` (element-wise: each point has its own epoch's satellites)."""
+    rx = geometry.geodetic_to_ecef(lat_rad, lon_rad, h_m)
+    r = geometry.enu_rotation(lat_rad, lon_rad)
+    d = sat_ecef_m - rx[..., None, :]
+    enu = jnp.einsum("...ik,...sk->...si", r, d)
+    e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
+    az = jnp.mod(jnp.arctan2(e, n), 2.0 * jnp.pi)
+    el = jnp.arctan2(u, jnp.hypot(e, n))
+    return az, el, sat_ok & (el >= mask_rad)
+
+
+@functools.lru_cache(maxsize=8)
+def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m):
+    """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel."""
+    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s)
+    f = jax.jit(lambda la, lo: jnp.max(jnp.sum(look(
+        la, lo, h_m, jnp.asarray(ecef)[None], jnp.asarray(ok)[None],
+        np.deg2rad(mask_deg))[2], -1)))
+    lo = np.deg2rad(np.asarray(lons))
+    return max(int(f(np.deg2rad(la) * np.ones((len(lons), 1)), lo[:, None])) for la in lats)
+
+
+def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
+    """Per longitude of a latitude row, the CSV towers in view: az, el, valid, label
+    ``(n_lon, max_sops)`` (nearest first within [d_min_m, d_max_m]) and the number of carriers."""
+    tl, tn, th, tc, names = read_towers(towers_csv)
+    t_ecef = np.asarray(geometry.geodetic_to_ecef(np.deg2rad(tl), np.deg2rad(tn), th))
+    n_lon = len(lons_deg)
+    az = np.zeros((n_lon, max_sops))
+    el = np.zeros((n_lon, max_sops))
+    valid = np.zeros((n_lon, max_sops), bool)
+    label = np.full((n_lon, max_sops), 2, np.int32)
+    la = np.deg2rad(lat_deg)
+    for j, lo_deg in enumerate(lons_deg):
+        lo = np.deg2rad(lo_deg)
+        rx = np.asarray(geometry.geodetic_to_ecef(la, lo, h_m))
+        enu = np.asarray(geometry.enu_rotation(la, lo)) @ (t_ecef - rx).T  # (3, N)
+        dist = np.hypot(enu[0], enu[1])
+        ok = (dist >= d_min_m) & (dist <= d_max_m)
+        idx = np.flatnonzero(ok)[np.argsort(dist[ok], kind="stable")][:max_sops]
+        k = idx.size
+        az[j, :k] = np.mod(np.arctan2(enu[0, idx], enu[1, idx]), 2 * np.pi)
+        el[j, :k] = np.arctan2(enu[2, idx], dist[idx])
+        valid[j, :k] = True
+        label[j, :k] = 2 + tc[idx]
+    return az, el, valid, label, len(names)
+
+
+# ------------------------------------------------------------------------------------ kernel
+
+
+@functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
+                                                "budget", "requirements"))
+def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
+               gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
+               requirements):
+    """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
+    ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
+    ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
+    towers), through the MHSS kernel and the service level's criteria."""
+    n_t = sat_ecef.shape[0]
+    n_lon = lons_rad.shape[0]
+    lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
+    t_i = idx % n_t
+    az, el, vis = look(lat_rad, lons_rad[lon_i], h_m, sat_ecef[t_i], sat_ok[t_i], mask_rad)
+    order = jnp.argsort(~vis, axis=-1, stable=True)[:, :n_slots]
+    take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
+    az, el, vis = take(az), take(el), take(vis)
+    const = jnp.take(sat_const, order)
+    is_gps = const == GPS
+    el = jnp.where(vis, el, jnp.pi / 2)  # padding: finite, harmless, masked
+    vi_g, va_g = gnss_variances(el, gnss["sigma_ura_gps_m"])
+    vi_e, va_e = gnss_variances(el, gnss["sigma_ura_gal_m"])
+    x = dict(var_int=jnp.where(is_gps, vi_g, vi_e), var_acc=jnp.where(is_gps, va_g, va_e),
+             b_nom=jnp.where(is_gps, gnss["b_nom_gps_m"], gnss["b_nom_gal_m"]),
+             p_sat=jnp.where(is_gps, gnss["p_sat_gps"], gnss["p_sat_gal"]),
+             constellation=const.astype(jnp.int32), valid=vis)
+    g = geometry.geometry_rows(az, el)
+    if n_sops:
+        if bpp:
+            tw = jax.vmap(lambda i: geometry.bpp_towers(
+                jax.random.fold_in(key, i), n_sops, sop["d_min_m"], sop["d_max_m"],
+                sop["h_min_m"], sop["h_max_m"]))(lon_i)
+            s_az, s_el = tw.az_rad, tw.el_rad
+            s_valid = jnp.ones(s_az.shape, bool)
+            s_label = jnp.full(s_az.shape, 2, jnp.int32)
+        else:
+            s_az, s_el, s_valid, s_label = (towers[k][lon_i] for k in ("az", "el", "valid",
+                                                                     "label"))
+        vi_s, va_s = sop_variances(jnp.full(s_az.shape, sop["sigma_ura_sop_m"]))
+        s = dict(var_int=vi_s, var_acc=va_s, b_nom=jnp.zeros(s_az.shape),
+                 p_sat=jnp.full(s_az.shape, sop["p_s_sop"]), constellation=s_label,
+                 valid=s_valid)
+        x = {k: jnp.concatenate([x[k], s[k]], -1) for k in x}
+        g = jnp.concatenate([g, geometry.geometry_rows(s_az, jnp.where(s_valid, s_el, 0.0))],
+                            -2)
+    r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
+                           x["p_sat"], p_const, x["valid"], budget=budget, max_order=max_order)
+    ok = av.available(r.hpl_m, r.vpl_m, r.emt_m, r.sigma_acc_u_m, r.status, requirements)
+    return {"hpl_m": r.hpl_m, "vpl_m": r.vpl_m, "emt_m": r.emt_m,
+            "sigma_acc_m": r.sigma_acc_u_m, "status": r.status.astype(jnp.int8),
+            "n_gnss": jnp.sum(vis, -1).astype(jnp.int16),
+            "n_sops": jnp.sum(x["valid"][:, n_slots:], -1).astype(jnp.int16),
+            "available": ok}
+
+
+OUTPUTS = {"hpl_m": "float64", "vpl_m": "float64", "emt_m": "float64", "sigma_acc_m": "float64",
+           "status": STATUS_DTYPE, "n_gnss": "int16", "n_sops": "int16", "available": "bool"}
+
+
+class MapRow:
+    """The index kernel of one latitude row (``mc.sweep``: ``index_kernel``)."""
+
+    index_kernel = True
+
+    def __init__(self, params, lat_deg):
+        p = params
+        ecef, ok, cons, _, t_off, _ = constellation_orbits(p["gps"], p["galileo"],
+                                                           p["duration_s"], p["step_s"])
+        self.lat_rad = np.deg2rad(float(lat_deg))
+        self.h_m = float(p["height_m"])
+        self.mask_rad = float(np.deg2rad(p["mask_deg"]))
+        self.lons_rad = jnp.asarray(np.deg2rad(np.asarray(p["lon_deg"])))
+        self.sat = (jnp.asarray(ecef), jnp.asarray(ok), jnp.asarray(cons))
+        self.gnss = {k: p[k] for k in ("sigma_ura_gps_m", "sigma_ura_gal_m", "b_nom_gps_m",
+                                       "b_nom_gal_m", "p_sat_gps", "p_sat_gal")}
+        self.sop = {k: p[k] for k in ("d_min_m", "d_max_m", "h_min_m", "h_max_m",
+                                      "sigma_ura_sop_m", "p_s_sop")}
+        lay = layout(p)
+        self.static = dict(n_slots=lay["n_slots"], n_sops=lay["n_sops"], bpp=lay["bpp"],
+                           max_order=lay["max_order"], budget=lay["level"].budget,
+                           requirements=lay["requirements"])
+        self.p_const = jnp.asarray(lay["p_const"])
+        self.towers = None
+        if p["towers"] != "none":
+            az, el, valid, label, _ = tower_slots(p["towers"], float(lat_deg), p["lon_deg"],
+                                                  p["d_min_m"], p["d_max_m"], p["max_sops"],
+                                                  p["height_m"])
+            self.towers = {"az": jnp.asarray(az), "el": jnp.asarray(el),
+                           "valid": jnp.asarray(valid), "label": jnp.asarray(label)}
+
+    def __call__(self, idx, key):
+        return map_kernel(jnp.asarray(idx), key, self.lat_rad, self.lons_rad,
+                          self.h_m, *self.sat, self.mask_rad, self.gnss, self.sop,
+                          self.towers, self.p_const, **self.static)
+
+
+def bpp_count(p):
+    """Towers per user of the BPP: density x annulus area, rounded, capped at max_sops."""
+    area_km2 = np.pi * (p["d_max_m"] ** 2 - p["d_min_m"] ** 2) / 1e6
+    return int(min(round(p["sops_per_km2"] * area_km2), p["max_sops"]))
+
+
+@functools.lru_cache(maxsize=8)
+def _layout(key):
+    p = dict(key)
+    level = av.SERVICE_LEVELS[p["preset"]]
+    base = level.requirements
+    req = av.Requirements(*(
+        base[i] if p[k] == "preset" else (np.inf if p[k] == "none" else float(p[k]))
+        for i, k in enumerate(("val_m", "hal_m", "emt_m", "sigma_acc_m"))))
+    n_slots = max_visible(p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"],
+                          p["lat_deg"], p["lon_deg"], p["height_m"])
+    n_slots = max(n_slots, 1)
+    if p["towers"] != "none":
+        n_carriers = len(read_towers(p["towers"])[4])
+        n_sops, bpp = p["max_sops"], False
+    else:
+        n_sops, bpp = bpp_count(p), True
+        n_carriers = 1 if n_sops else 0
+    p_const = [p["p_const_gps"], p["p_const_gal"]] + [p["p_const_sop"]] * n_carriers
+    # the order the P_thresh rule needs in the worst case: every slot in view, every source
+    # at the larger per-satellite prior (the kernel still picks each geometry's own order)
+    L = n_slots + n_sops
+    labels = [GPS] * ((n_slots + 1) // 2) + [GALILEO] * (n_slots // 2) + [2] * n_sops
+    p_sat = [max(p["p_sat_gps"], p["p_sat_gal"])] * n_slots + [p["p_s_sop"]] * n_sops
+    max_order = int(required_order(
+        jnp.ones((1, L), bool), jnp.asarray([labels]), jnp.asarray([p_sat]),
+        jnp.asarray([p_const]), level.budget.p_thresh, cap=2))
+    target = level.target if p["target"] == "preset" else float(p["target"])
+    return {"level": level, "requirements": req, "target": target, "n_slots": n_slots,
+            "n_sops": n_sops, "bpp": bpp, "p_const": np.asarray(p_const), "max_order": max_order,
+            "n_carriers": n_carriers}
+
+
+def layout(params):
+    """Static shapes and constants of a run: GNSS and SOP slots, P_const per constellation,
+    the MHSS order, the service level and its requirements (cached per parameters)."""
+    return _layout(tuple(sorted((k, v) for k, v in params.items() if k != "chunk")))
+
+
+# ------------------------------------------------------------------------------------ study
+
+
+def parse_choice(*choices):
+    def parse(name, v):
+        s = str(v).strip()
+        if s not in choices:
+            raise ValueError(f"{name} must be one of {', '.join(choices)}, got {v!r}")
+        return s
+    return parse
+
+
+def parse_geojson(name, v):
+    """'none' or a GeoJSON file of coastlines (LineString, MultiLineString, Polygon or
+    MultiPolygon features in lon/lat degrees, e.g. Natural Earth's coastline)."""
+    s = str(v).strip()
+    if s == "none":
+        return s
+    p = Path(s).expanduser()
+    try:
+        read_lines(p)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{name} must be 'none' or a GeoJSON file of lines or polygons in "
+                         f"lon/lat degrees; {s!r}: {e}") from None
+    return str(p.resolve())
+
+
+def read_lines(path):
+    """Polylines (list of (N, 2) lon/lat arrays) of a GeoJSON file."""
+    import json
+
+    doc = json.loads(Path(path).read_text())
+    feats = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
+    lines = []
+    for f in feats:
+        g = f.get("geometry", f)
+        t, c = g["type"], g["coordinates"]
+        if t == "LineString":
+            parts = [c]
+        elif t in ("MultiLineString", "Polygon"):
+            parts = c
+        elif t == "MultiPolygon":
+            parts = [ring for poly in c for ring in poly]
+        else:
+            continue
+        lines += [np.asarray(x, float)[:, :2] for x in parts if len(x) > 1]
+    if not lines:
+        raise ValueError("no LineString/Polygon geometry found")
+    return lines
+
+
+def _p(value, parse, doc, unit=""):
+    return Param(value, parse, doc, unit)
+
+
+class AvailabilityMap(SweepStudy):
+    name = "availability-map"
+    title = "ARAIM / OARAIM availability and coverage map (MAAST-style), GNSS + optional SOPs"
+    seed_file = "004_55e51818ceb3e5a9.txt"
+    realization = ("one user (a longitude of the latitude row) at one epoch; the number of "
+                   "realizations is set by the grid: longitudes x epochs per latitude")
+    default_realizations = 1  # replaced by fixed_realizations (the grid)
+    quick_realizations = 1
+    axis_names = ("lat_deg",)
+    key_axes = ("lat_deg",)  # BPP towers differ from row to row
+    params = {
+        "preset": _p("lpv200", parse_choice(*av.SERVICE_LEVELS),
+                     "service level: lpv200 (MAAST: VAL 35, HAL 40, EMT 15, sigma_acc 1.87 m, "
+                     "99.5 %), lpv200-add (the ADD's allocation) or h-araim (HAL 185 m, "
+                     "99.9 %)"),
+        "lat_deg": _p(MAAST_DEFAULTS["lat_deg"], parse_grid(-90.0, 90.0),
+                      "user latitudes (cells): START:STOP:STEP or a list (MAAST: -90:80:10)",
+                      "deg"),
+        "lon_deg": _p(MAAST_DEFAULTS["lon_deg"], parse_grid(-180.0, 360.0),
+                      "user longitudes: START:STOP:STEP or a list", "deg"),
+        "height_m": _p(0.0, in_range(-500.0, 20000.0), "user height above the ellipsoid", "m"),
+        "duration_s": _p(MAAST_DEFAULTS["duration_s"], in_range(1.0, 7 * 86400.0),
+                         "time span of the map", "s"),
+        "step_s": _p(MAAST_DEFAULTS["step_s"], in_range(1.0, 86400.0),
+                     "epoch step (MAAST: 300 s)", "s"),
+        "gps": _p("auto", parse_orbits(GPS_ALMANAC),
+                  f"GPS orbits: auto ({GPS_ALMANAC}, fetched if missing), nominal, none, or a "
+                  "YUMA/SEM almanac or RINEX navigation file"),
+        "galileo": _p("auto", parse_orbits(GALILEO_ALMANAC),
+                      f"Galileo orbits: auto ({GALILEO_ALMANAC}), nominal, none, or a file"),
+        "mask_deg": _p(MAAST_DEFAULTS["mask_deg"], in_range(0.0, 89.0),
+                       "elevation mask (MAAST/ADD: 5 deg)", "deg"),
+        "sigma_ura_gps_m": _p(MAAST_DEFAULTS["sigma_ura_gps_m"], positive,
+                              "GPS sigma_URA (sigma_URE = 2/3 of it)", "m"),
+        "sigma_ura_gal_m": _p(MAAST_DEFAULTS["sigma_ura_gal_m"], positive,
+                              "Galileo sigma_URA (sigma_URE = 2/3 of it)", "m"),
+        "b_nom_gps_m": _p(MAAST_DEFAULTS["b_nom_gps_m"], non_negative, "GPS b_nom", "m"),
+        "b_nom_gal_m": _p(MAAST_DEFAULTS["b_nom_gal_m"], non_negative, "Galileo b_nom", "m"),
+        "p_sat_gps": _p(MAAST_DEFAULTS["p_sat_gps"], probability, "GPS P_sat"),
+        "p_sat_gal": _p(MAAST_DEFAULTS["p_sat_gal"], probability, "Galileo P_sat"),
+        "p_const_gps": _p(MAAST_DEFAULTS["p_const_gps"], probability, "GPS P_const"),
+        "p_const_gal": _p(MAAST_DEFAULTS["p_const_gal"], probability, "Galileo P_const"),
+        "val_m": _p("preset", parse_limit, "vertical alert limit: preset, none or metres", "m"),
+        "hal_m": _p("preset", parse_limit, "horizontal alert limit: preset, none or metres",
+                    "m"),
+        "emt_m": _p("preset", parse_limit, "EMT threshold: preset, none or metres", "m"),
+        "sigma_acc_m": _p("preset", parse_limit,
+                          "vertical accuracy sigma threshold: preset, none or metres", "m"),
+        "target": _p("preset", parse_target,
+                     "availability a point needs to count as covered: preset (LPV-200 99.5 %, "
+                     "H-ARAIM 99.9 %) or a share in (0, 1]"),
+        "sops_per_km2": _p(0.0, non_negative, "BPP tower density around each user (0: no "
+                           "SOPs); towers = density x pi (d_max^2 - d_min^2)", "1/km^2"),
+        "towers": _p("none", parse_towers, "tower CSV (lat_deg, lon_deg, height_m, carrier): "
+                     "towers within [d_min_m, d_max_m] of a user, one SOP constellation per "
+                     "carrier; replaces the BPP"),
+        "max_sops": _p(8, count(1, 16), "SOP slots per user (the BPP count is capped at it)"),
+        "d_min_m": _p(5.0, non_negative, "tower distance, min (seed 001)", "m"),
+        "d_max_m": _p(3000.0, positive, "tower distance, max (seed 001)", "m"),
+        "h_min_m": _p(0.0, in_range(-1000.0, 1000.0), "BPP tower height above the user, min",
+                      "m"),
+        "h_max_m": _p(50.0, in_range(-1000.0, 1000.0), "BPP tower height above the user, max",
+                      "m"),
+        "sigma_ura_sop_m": _p(1.0, positive, "SOP sigma_URA^S (sigma_URE^S equal)", "m"),
+        "p_s_sop": _p(1e-5, probability, "SOP per-tower fault prior P_s^S"),
+        "p_const_sop": _p(1e-4, probability, "SOP constellation fault prior (seed 004 "
+                          "Table I)"),
+        "coastlines": _p("none", parse_geojson, "GeoJSON coastlines drawn on the maps "
+                         "(optional; e.g. Natural Earth 110m coastline)"),
+        "chunk": _p(16384, count(1024), "realizations per task and chunk file (not a result)"),
+    }
+
+    def check(self, p):
+        if p["d_min_m"] >= p["d_max_m"]:
+            raise ValueError(f"d_min_m must be < d_max_m, got {p['d_min_m']} and "
+                             f"{p['d_max_m']}")
+        if p["h_min_m"] > p["h_max_m"]:
+            raise ValueError(f"h_min_m must be <= h_max_m, got {p['h_min_m']} and "
+                             f"{p['h_max_m']}")
+        if p["gps"] == "none" and p["galileo"] == "none":
+            raise ValueError("gps and galileo are both 'none': the map needs at least one "
+                             "constellation")
+        if p["towers"] != "none" and p["sops_per_km2"] > 0:
+            raise ValueError("give either towers=CSV or sops_per_km2 > 0, not both")
+        n_t = len(np.arange(0.0, p["duration_s"] - 1e-9, p["step_s"]))
+        if len(p["lon_deg"]) * n_t >= 2**31:
+            raise ValueError("lon_deg x epochs per latitude must stay below 2^31; use fewer "
+                             "longitudes or a longer step_s")
+
+    def data_files(self, params):
+        return tuple(f for k, f in (("gps", GPS_ALMANAC), ("galileo", GALILEO_ALMANAC))
+                     if params.get(k) == "auto")
+
+    def epochs(self, params):
+        return np.arange(0.0, params["duration_s"] - 1e-9, params["step_s"])
+
+    def fixed_realizations(self, params):
+        """Realizations per latitude row: longitudes x epochs (not a sample size)."""
+        return len(params["lon_deg"]) * len(self.epochs(params))
+
+    def kernel(self, params, coords):
+        return MapRow(params, coords["lat_deg"])
+
+    def reducers(self, params):
+        n = self.fixed_realizations(params)
+        return tuple(Values(k, n, dtype) for k, dtype in OUTPUTS.items())
+
+    def finish(self, params, ds, realizations, seed):
+        lats = np.asarray(params["lat_deg"])
+        lons = np.asarray(params["lon_deg"])
+        t = self.epochs(params)
+        shape = (lats.size, lons.size, t.size)
+        cube = {k: (("lat_deg", "lon_deg", "time_s"), ds[k].values.reshape(shape))
+                for k in OUTPUTS}
+        lay = layout(params)
+        req = lay["requirements"]
+        *_, sky_desc = constellation_orbits(params["gps"], params["galileo"],
+                                            params["duration_s"], params["step_s"])
+        avail = av.availability(cube["available"][1], axis=-1)
+        hpl995 = av.pl_percentile(cube["hpl_m"][1], 99.5)
+        vpl995 = av.pl_percentile(cube["vpl_m"][1], 99.5)
+        out = xr.Dataset(
+            {**cube,
+             "availability": (("lat_deg", "lon_deg"), avail),
+             "hpl_995_m": (("lat_deg", "lon_deg"), hpl995),
+             "vpl_995_m": (("lat_deg", "lon_deg"), vpl995)},
+            coords={"lat_deg": lats, "lon_deg": lons, "time_s": t})
+        cov = av.coverage(avail, lats, lay["target"]) if np.any(np.abs(lats) < 90) \
+            else float("nan")
+        status = cube["status"][1]
+        ok = status == 0
+        fin = lambda x: x[np.isfinite(x)]  # noqa: E731
+        metrics = {
+            "coverage_pct": 100.0 * cov,
+            "availability_mean_pct": 100.0 * float(avail.mean()),
+            "availability_min_pct": 100.0 * float(avail.min()),
+            "epochs_pl_not_computed_pct": 100.0 * float(np.mean(~ok)),
+            "epochs_vpl_over_val_pct": 100.0 * float(np.mean(cube["vpl_m"][1] > req.val_m)),
+            "epochs_hpl_over_hal_pct": 100.0 * float(np.mean(cube["hpl_m"][1] > req.hal_m)),
+            "epochs_emt_over_limit_pct": 100.0 * float(np.mean(cube["emt_m"][1] > req.emt_m)),
+            "epochs_sigma_acc_over_limit_pct": 100.0 * float(np.mean(
+                cube["sigma_acc_m"][1] > req.sigma_acc_v_m)),
+            "vpl_median_m": float(np.median(fin(cube["vpl_m"][1]))) if ok.any() else None,
+            "hpl_median_m": float(np.median(fin(cube["hpl_m"][1]))) if ok.any() else None,
+            "gnss_in_view_min_mean_max": [int(cube["n_gnss"][1].min()),
+                                          round(float(cube["n_gnss"][1].mean()), 3),
+                                          int(cube["n_gnss"][1].max())],
+            "sops_in_view_mean": float(cube["n_sops"][1].mean()),
+            "grid_points": int(lats.size * lons.size), "epochs": int(t.size),
+            "protection_levels": int(lats.size * lons.size * t.size),
+            "gnss_slots": lay["n_slots"], "sop_slots": lay["n_sops"],
+            "mhss_max_order": lay["max_order"],
+            "service_level": lay["level"].name,
+            "requirements_m": {k: (None if np.isinf(v) else v)
+                               for k, v in req._asdict().items()},
+            "sky_source": sky_desc,
+        }
+        rows = [{"quantity": f"coverage: area with availability >= {100 * lay['target']:g} "
+                 f"% ({lay['level'].name})", "unit": "%", "published": None,
+                 "reproduced": metrics["coverage_pct"],
+                 "note": "area-weighted (cos latitude); no seed publishes a map, MAAST is the "
+                 "reference implementation"},
+                {"quantity": "mean availability over the grid", "unit": "%", "published": None,
+                 "reproduced": metrics["availability_mean_pct"], "note": ""}]
+        out = out.assign_attrs(service_level=lay["level"].name, sky_source=sky_desc,
+                               target=lay["target"], coverage_pct=metrics["coverage_pct"],
+                               coastlines=params["coastlines"],
+                               **{f"{k}_limit": (-1.0 if np.isinf(v) else v)
+                                  for k, v in req._asdict().items()})
+        return StudyResult(out, rows, metrics, {"sky_source": sky_desc,
+                                                 "service_level": lay["level"].name})
+
+    def plot(self, out_dir):
+        import matplotlib.pyplot as plt
+        from matplotlib.colors import BoundaryNorm, Normalize
+
+        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
+        lats, lons = ds["lat_deg"].values, ds["lon_deg"].values
+        lines = (read_lines(ds.attrs["coastlines"])
+                 if ds.attrs.get("coastlines", "none") != "none" else [])
+        panels = [("availability", 100.0 * ds["availability"].values, "availability (%)",
+                   "viridis", (0.0, 100.0)),
+                  ("vpl_995_m", ds["vpl_995_m"].values, "99.5 % VPL (m)", "magma_r", None),
+                  ("hpl_995_m", ds["hpl_995_m"].values, "99.5 % HPL (m)", "magma_r", None)]
+        fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), layout="constrained")
+        for ax, (_, v, label, cmap, lim) in zip(axes, panels, strict=True):
+            finite = v[np.isfinite(v)]
+            if lim:  # availability in MAAST's contour bands
+                norm = BoundaryNorm(AVAILABILITY_BANDS_PCT, plt.get_cmap(cmap).N)
+            else:
+                vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
+                norm = Normalize(0.0, max(vmax, 1e-9))
+            im = ax.pcolormesh(_edges(lons), _edges(lats), np.where(np.isfinite(v), v, np.nan),
+                               cmap=cmap, norm=norm, shading="flat")
+            for ln in lines:
+                ax.plot(ln[:, 0], ln[:, 1], color="k", lw=0.5)
+            ax.set_xlim(_edges(lons)[[0, -1]])
+            ax.set_ylim(_edges(lats)[[0, -1]])
+            ax.set_xlabel("longitude (deg)")
+            ax.set_ylabel("latitude (deg)")
+            ax.set_title(label + ("" if lim else " (grey: unavailable > 0.5 %)"), fontsize=9)
+            ax.set_facecolor("0.8")
+            fig.colorbar(im, ax=ax, shrink=0.8)
+        fig.suptitle(f"{ds.attrs.get('service_level', '')}: coverage "
+                     f"{ds.attrs.get('coverage_pct', float('nan')):.1f} % at availability >= "
+                     f"{100 * ds.attrs.get('target', 0.995):g} %; "
+                     f"{ds.attrs.get('sky_source', '')}", fontsize=9)
+        path = f"{out_dir}/availability_maps.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return [path]
+
+
+def _edges(x):
+    """Cell edges around centres x (degrees)."""
+    x = np.asarray(x, float)
+    if x.size == 1:
+        return np.array([x[0] - 0.5, x[0] + 0.5])
+    mid = (x[1:] + x[:-1]) / 2
+    return np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])

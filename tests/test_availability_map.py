@@ -1,0 +1,254 @@
+"""availability-map (issue 20): the service-level criteria by hand, the grid's sky against
+geometry.sky, every PL of a small map against the NumPy oracle, SOP towers (BPP and CSV), the
+sweep engine's index kernels and Values reducer, and the command line."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from oaraim import geometry
+from oaraim.araim import availability as av
+from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.geometry.ephemeris import GALILEO
+from oaraim.geometry.sky import look_angles
+from oaraim.reference_mhss import protection_levels_reference
+from oaraim.studies import availability_map as am
+from oaraim.studies.cli import app
+from oaraim.studies.execute import run_study
+from oaraim.studies.registry import STUDIES
+
+STUDY = STUDIES["availability-map"]
+#: two latitude rows x three longitudes x 4 epochs (3 h at 2700 s)
+SMALL = {"lat_deg": "-35,50", "lon_deg": "-120,0,140", "duration_s": "10800",
+         "step_s": "2700"}
+
+
+# ------------------------------------------------------------------ criteria, by hand
+
+
+def test_available_needs_every_criterion_and_a_computed_pl():
+    req = av.Requirements(val_m=35.0, hal_m=40.0, emt_m=15.0, sigma_acc_v_m=1.87)
+    hpl = np.array([10.0, 41.0, 10.0, 10.0, 10.0, np.inf, 40.0])
+    vpl = np.array([20.0, 20.0, 35.5, 20.0, 20.0, np.inf, 35.0])
+    emt = np.array([5.0, 5.0, 5.0, 15.5, 5.0, np.inf, 15.0])
+    acc = np.array([1.0, 1.0, 1.0, 1.0, 1.9, np.inf, 1.87])
+    status = np.array([0, 0, 0, 0, 0, 3, 0])
+    got = np.asarray(av.available(hpl, vpl, emt, acc, status, req))
+    assert got.tolist() == [True, False, False, False, False, False, True]  # limits inclusive
+    h_only = av.Requirements(np.inf, 40.0, np.inf, np.inf)
+    assert np.asarray(av.available(hpl, vpl, emt, acc, status, h_only)).tolist() == \
+        [True, False, True, True, True, False, True]
+
+
+def test_pl_percentile_is_nearest_rank_and_inf_past_the_unavailable_share():
+    x = np.arange(1.0, 201.0)  # 200 epochs: 99.5 % -> rank ceil(199) = 199 -> value 199
+    assert av.pl_percentile(x, 99.5) == 199.0
+    x[-1] = np.inf  # one epoch of 200 unavailable (0.5 %): still finite
+    assert av.pl_percentile(x, 99.5) == 199.0
+    x[-2] = np.inf  # two (1 %): the 99.5 % PL is infinite
+    assert av.pl_percentile(x, 99.5) == np.inf
+    assert av.pl_percentile(np.array([[3.0, 1.0, 2.0]]), 50.0)[0] == 2.0
+
+
+def test_coverage_weights_points_by_cos_latitude():
+    # cos 0 = 1, cos 60 = 0.5, cos 90 = 0: covered points (0, a) and (60, b)
+    a = np.array([[1.0, 0.99], [0.996, 0.5], [0.0, 0.0]])
+    got = av.coverage(a, [0.0, 60.0, 90.0], target=0.995)
+    assert got == pytest.approx((1.0 + 0.5) / (2 * 1.0 + 2 * 0.5), abs=1e-15)
+    with pytest.raises(ValueError, match="away from the poles"):
+        av.coverage([[1.0]], [90.0])
+
+
+def test_presets_are_maast_and_add_values():
+    """MAAST for ARAIM (main_maast_araim.m): vhal = [35, 40, 15, 1.87], percent = 0.995,
+    PHMI_VERT 9.8e-8, PHMI_HOR 2e-9, PFA_VERT 3.9e-6, PFA_HOR 0.9e-6, P_THRES 6e-8, P_EMT 1e-5;
+    the ADD table: PFA_HOR 9e-8, P_THRES 8e-8; H-ARAIM: HAL 185 m (RNP 0.1) at 99.9 %."""
+    def six(b):
+        return (b.phmi_v, b.phmi_h, b.p_fa_v, b.p_fa_h, b.p_thresh, b.p_emt)
+
+    lpv = av.SERVICE_LEVELS["lpv200"]
+    assert lpv.requirements == (35.0, 40.0, 15.0, 1.87) and lpv.target == 0.995
+    assert six(lpv.budget) == (9.8e-8, 2e-9, 3.9e-6, 9e-7, 6e-8, 1e-5)
+    assert six(av.SERVICE_LEVELS["lpv200-add"].budget) == (9.8e-8, 2e-9, 3.9e-6, 9e-8, 8e-8,
+                                                           1e-5)
+    h = av.SERVICE_LEVELS["h-araim"]
+    assert h.requirements.hal_m == 185.0 and np.isinf(h.requirements.val_m) and h.target == 0.999
+
+
+def test_defaults_are_maast_conventions():
+    """main_maast_araim.m (2018): 5 deg mask, URA 1 m, URE 2/3 URA, b_nom 0.75 m, P_sat 1e-5,
+    P_const 1e-8 GPS / 1e-4 Galileo, 24 h at 300 s; usrworld.dat: 10 deg, lat -90..80."""
+    p = STUDY.validate({})
+    assert (p["mask_deg"], p["sigma_ura_gps_m"], p["sigma_ura_gal_m"], p["b_nom_gps_m"],
+            p["b_nom_gal_m"], p["p_sat_gps"], p["p_sat_gal"], p["p_const_gps"],
+            p["p_const_gal"]) == (5.0, 1.0, 1.0, 0.75, 0.75, 1e-5, 1e-5, 1e-8, 1e-4)
+    assert len(p["lat_deg"]) * len(p["lon_deg"]) == 648 and max(p["lat_deg"]) == 80.0
+    assert STUDY.fixed_realizations(p) == 36 * 288
+
+
+def test_grid_parser():
+    parse = am.parse_grid(-90.0, 90.0)
+    assert parse("lat", "-90:90:10") == tuple(float(x) for x in range(-90, 91, 10))
+    assert parse("lat", "10,-5") == (-5.0, 10.0)
+    assert len(am.parse_grid(-180, 360)("lon", "-180:179:1")) == 360
+    for bad, msg in (("0:10", "START:STOP:STEP"), ("10:0:1", "START:STOP:STEP"),
+                     ("-91:0:1", r"\[-90.0, 90.0\]"), ("1,1", "twice")):
+        with pytest.raises(ValueError, match=msg):
+            parse("lat_deg", bad)
+
+
+# ------------------------------------------------------------------ the map against oracles
+
+
+@pytest.fixture(scope="module")
+def small(shared_data):
+    p = STUDY.validate(SMALL)
+    return p, STUDY.run(p, STUDY.fixed_realizations(p), 0)
+
+
+def test_grid_sky_matches_geometry_sky(small, shared_data):
+    """Satellites in view at every (lat, lon, epoch) of the cube equal geometry.sky's count
+    for the same receiver, each almanac on its own clock from its earliest t_oa."""
+    p, res = small
+    ds = res.dataset
+    t_off = ds["time_s"].values
+    counts = 0
+    for name, file, system in (("gps", am.GPS_ALMANAC, "G"), ("galileo", am.GALILEO_ALMANAC,
+                                                               "E")):
+        alm = geometry.read_yuma(shared_data / file, system=system)
+        t0 = float(np.min(alm.records.toa_s))
+        lat, lon = np.meshgrid(np.deg2rad(ds["lat_deg"].values),
+                               np.deg2rad(ds["lon_deg"].values), indexing="ij")
+        rx = np.asarray(geometry.geodetic_to_ecef(lat, lon, 0.0))
+        s = geometry.sky(rx, t0 + t_off, source=alm, mask_deg=p["mask_deg"],
+                         constellations=(name,))
+        counts = counts + np.asarray(s.valid).sum(-1)
+    np.testing.assert_array_equal(ds["n_gnss"].values, counts)
+    assert ds["n_gnss"].values.min() >= 8  # GPS 24 + Galileo 24 at a 5 deg mask
+
+
+def test_every_pl_matches_the_numpy_oracle(small):
+    """Each cube entry's HPL, VPL, EMT and sigma_acc against oaraim.reference_mhss on the same
+    satellites (look angles from geometry.sky.look_angles, inputs built here from the MAAST
+    defaults), to 1e-5 m."""
+    p, res = small
+    ds = res.dataset
+    lay = am.layout(p)
+    ecef, ok, cons, _, t_off, _ = am.constellation_orbits(p["gps"], p["galileo"],
+                                                          p["duration_s"], p["step_s"])
+    worst = 0.0
+    for i, la in enumerate(ds["lat_deg"].values):
+        for j, lo in enumerate(ds["lon_deg"].values):
+            rx = np.asarray(geometry.geodetic_to_ecef(np.deg2rad(la), np.deg2rad(lo), 0.0))
+            az, el, _, valid = (np.asarray(x) for x in look_angles(
+                rx, ecef, ok, np.deg2rad(p["mask_deg"])))
+            for k in range(t_off.size):
+                v = valid[k]
+                gal = cons[v] == GALILEO
+                e = el[k][v]
+                vi_g, va_g = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gps_m"]))
+                vi_e, va_e = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gal_m"]))
+                ref = protection_levels_reference(
+                    np.asarray(geometry.geometry_rows(az[k][v], e)), cons[v],
+                    np.where(gal, vi_e, vi_g), np.where(gal, va_e, va_g),
+                    np.where(gal, p["b_nom_gal_m"], p["b_nom_gps_m"]),
+                    np.where(gal, p["p_sat_gal"], p["p_sat_gps"]), lay["p_const"],
+                    lay["level"].budget, max_order=lay["max_order"])
+                got = [ds[n].values[i, j, k] for n in ("hpl_m", "vpl_m", "emt_m",
+                                                       "sigma_acc_m")]
+                want = [ref.hpl_m, ref.vpl_m, ref.emt_m, ref.sigma_acc_u_m]
+                assert ds["status"].values[i, j, k] == ref.status
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+                worst = max(worst, float(np.max(np.abs(np.subtract(got, want)))))
+                a = av.available(*got, ref.status, lay["requirements"])
+                assert bool(ds["available"].values[i, j, k]) == bool(a)
+    assert worst < 1e-5
+
+
+def test_maps_and_summary_follow_from_the_cube(small):
+    p, res = small
+    ds = res.dataset
+    avail = ds["available"].values.mean(-1)
+    np.testing.assert_array_equal(ds["availability"].values, avail)
+    np.testing.assert_array_equal(ds["vpl_995_m"].values, av.pl_percentile(ds["vpl_m"].values))
+    want = 100 * av.coverage(avail, ds["lat_deg"].values, 0.995)
+    assert res.metrics["coverage_pct"] == want
+    assert res.rows[0]["reproduced"] == want
+
+
+# ------------------------------------------------------------------ SOPs
+
+
+def test_bpp_towers_are_fixed_per_user_and_counted(shared_data):
+    p = STUDY.validate({**SMALL, "lat_deg": "50", "sops_per_km2": "0.5",
+                        "d_max_m": "2000", "max_sops": "8"})
+    n = am.bpp_count(p)
+    assert n == min(round(0.5 * np.pi * (2000.0**2 - 5.0**2) / 1e6), 8) == 6
+    lay = am.layout(p)
+    assert lay["n_sops"] == 6 and lay["p_const"].tolist() == [1e-8, 1e-4, 1e-4]
+    res = STUDY.run(p, STUDY.fixed_realizations(p), 0)
+    assert np.all(res.dataset["n_sops"].values == 6)
+    base = STUDY.run(STUDY.validate({**SMALL, "lat_deg": "50"}), 12, 0).dataset
+    # six extra ranging sources never leave a user worse off in view and, as SOP, add one
+    # clock column: the VPL of a geometry that was available stays finite
+    ok = np.isfinite(base["vpl_m"].values)
+    assert np.all(np.isfinite(res.dataset["vpl_m"].values[ok]))
+
+
+def test_tower_csv_gives_one_constellation_per_carrier(tmp_path, shared_data):
+    """Three towers within 3 km of (50 N, 0 E) from two carriers, one far away: that user has
+    three SOPs in two SOP constellations (labels 2, 3), the others none."""
+    f = tmp_path / "towers.csv"
+    f.write_text("lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.0,0.02,30,B\n"
+                 "49.99,-0.01,25,A\n10,10,30,A\n")
+    p = STUDY.validate({**SMALL, "lat_deg": "50", "towers": str(f), "max_sops": "4"})
+    az, el, valid, label, n_car = am.tower_slots(str(f), 50.0, p["lon_deg"], p["d_min_m"],
+                                                 p["d_max_m"], 4, 0.0)
+    assert n_car == 2 and valid.sum(-1).tolist() == [0, 3, 0]
+    assert sorted(label[1, :3].tolist()) == [2, 2, 3]
+    assert am.layout(p)["p_const"].size == 4
+    res = STUDY.run(p, STUDY.fixed_realizations(p), 0)
+    assert res.dataset["n_sops"].values[0].max(-1).tolist() == [0, 3, 0]
+    bad = tmp_path / "bad.csv"
+    bad.write_text("lat,lon\n1,2\n")
+    with pytest.raises(ValueError, match="lat_deg, lon_deg, height_m, carrier"):
+        STUDY.validate({"towers": str(bad)})
+
+
+def test_sop_inputs_are_the_seed004_model():
+    vi, va = (np.asarray(x) for x in sop_variances(np.array([2.0])))
+    assert vi[0] == va[0] == 4.0  # sigma_URE^S = sigma_URA^S, no user term (DESIGN.md)
+
+
+# ------------------------------------------------------------------ engine and CLI
+
+
+def test_resume_and_chunking_give_the_same_cube(tmp_path, shared_data):
+    sets = [f"{k}={v}" for k, v in SMALL.items()]
+    _, a, _, _ = run_study(STUDY.name, out=tmp_path / "a", sets=sets + ["chunk=1024"],
+                           show_progress=False)
+    _, b, _, _ = run_study(STUDY.name, out=tmp_path / "b", sets=sets + ["chunk=4096"],
+                           show_progress=False)
+    import xarray as xr
+
+    da, db = (xr.open_zarr(d / "data.zarr", consolidated=False) for d in (a, b))
+    xr.testing.assert_identical(da.load(), db.load())
+    prov = json.loads((b / "provenance.json").read_text())
+    assert prov["realizations"] == 12 and set(prov["data_files"]) == {am.GPS_ALMANAC,
+                                                                       am.GALILEO_ALMANAC}
+    _, c, _, _ = run_study(STUDY.name, out=tmp_path / "a", sets=sets + ["chunk=1024"],
+                           show_progress=False, resume=True)
+    assert json.loads((c / "provenance.json").read_text())["sweep"]["chunks_computed"] == 0
+
+
+def test_cli_runs_and_rejects_realizations(tmp_path, shared_data):
+    r = CliRunner().invoke(app, ["run", STUDY.name, "--out", str(tmp_path), "--no-progress",
+                                 *sum((["--set", f"{k}={v}"] for k, v in SMALL.items()), [])])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / STUDY.name / "availability_maps.png").is_file()
+    r = CliRunner().invoke(app, ["run", STUDY.name, "--realizations", "5", "--no-progress"])
+    assert r.exit_code == 2 and "drop --realizations" in r.output
+    r = CliRunner().invoke(app, ["run", STUDY.name, "--set", "lat_deg=0:10", "--no-progress"])
+    assert r.exit_code == 2 and "START:STOP:STEP" in r.output
