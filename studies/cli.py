@@ -200,6 +200,9 @@ def bench(
     False,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the numbers here")] =
     None,
+    dask_map: Annotated[bool, typer.Option(
+        "--dask-map", help="also the 1 x 1 deg, 24 h availability map on a local Dask cluster "
+        "of 2 worker processes (minutes)")] = False,
 ):
     """Throughput of the kernels and the NumPy reference in the same run."""
     from oaraim.studies import bench as b
@@ -252,6 +255,17 @@ def bench(
               f"without and with exclusion: {e['wall_s']:.1f} s wall, {e['cpu_s']:.1f} s CPU "
               f"(first call with compilation {e['first_call_wall_s']:.1f} s; target 1000 runs "
               f"<= 60 s)", highlight=False)
+    res["availability_map"] = a = b.bench_availability_map(
+        {"lat_deg": "30:50:10", "lon_deg": "0:20:10"} if quick else None)
+    out.print(f"availability-map ({a['service_level']}), {a['users']:,} users x {a['epochs']} "
+              f"epochs: {a['wall_s']:.1f} s wall, compile included ({a['pl_per_s']:,.0f} PL/s; "
+              f"target < 60 s for the world map)", highlight=False)
+    if dask_map:
+        res["availability_map_dask"] = a = b.bench_availability_map(
+            {"lat_deg": "-90:90:1", "lon_deg": "-180:179:1"}, workers=2)
+        out.print(f"availability-map 1 x 1 deg on Dask (2 workers), {a['users']:,} users x "
+                  f"{a['epochs']} epochs: {a['wall_s']:.1f} s wall ({a['pl_per_s']:,.0f} PL/s)",
+                  highlight=False)
     if json_out is not None:
         json_out.write_text(json.dumps(res, indent=2) + "\n")
 
