@@ -252,3 +252,18 @@ def test_cli_runs_and_rejects_realizations(tmp_path, shared_data):
     assert r.exit_code == 2 and "drop --realizations" in r.output
     r = CliRunner().invoke(app, ["run", STUDY.name, "--set", "lat_deg=0:10", "--no-progress"])
     assert r.exit_code == 2 and "START:STOP:STEP" in r.output
+
+
+def test_broadcast_file_sky_runs_from_its_day(shared_data):
+    """A RINEX navigation file as the GPS sky (Galileo off): epochs from 00:00 of the file's
+    day, 30-32 healthy GPS satellites give 6-12 in view at 5 deg at mid-latitudes."""
+    nav = shared_data / "nav" / "brdc1820.10n"
+    p = STUDY.validate({"lat_deg": "40", "lon_deg": "-4", "duration_s": "86400",
+                        "step_s": "3600", "gps": str(nav), "galileo": "none"})
+    *_, t_off, desc = am.constellation_orbits(p["gps"], p["galileo"], p["duration_s"],
+                                              p["step_s"])
+    assert t_off.size == 24 and "brdc1820.10n" in desc
+    res = STUDY.run(p, STUDY.fixed_realizations(p), 0)
+    n = res.dataset["n_gnss"].values
+    assert 5 <= n.min() and n.max() <= 13
+    assert res.metrics["availability_mean_pct"] < 100.0  # GPS alone misses LPV-200 at times
