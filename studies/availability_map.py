@@ -46,12 +46,15 @@ from oaraim.studies.base import (
     Param,
     StudyResult,
     SweepStudy,
+    check_bpp_annulus,
     count,
     in_range,
     non_negative,
+    parse_choice,
     positive,
     probability,
 )
+from oaraim.studies.seed004_fig4 import cell_edges
 
 GPS_ALMANAC = "almanac/almmops.txt"
 GALILEO_ALMANAC = "almanac/alm_gal_ed259.txt"
@@ -436,15 +439,6 @@ def layout(params):
 # ------------------------------------------------------------------------------------ study
 
 
-def parse_choice(*choices):
-    def parse(name, v):
-        s = str(v).strip()
-        if s not in choices:
-            raise ValueError(f"{name} must be one of {', '.join(choices)}, got {v!r}")
-        return s
-    return parse
-
-
 def parse_geojson(name, v):
     """'none' or a GeoJSON file of coastlines (LineString, MultiLineString, Polygon or
     MultiPolygon features in lon/lat degrees, e.g. Natural Earth's coastline)."""
@@ -561,12 +555,7 @@ class AvailabilityMap(SweepStudy):
     }
 
     def check(self, p):
-        if p["d_min_m"] >= p["d_max_m"]:
-            raise ValueError(f"d_min_m must be < d_max_m, got {p['d_min_m']} and "
-                             f"{p['d_max_m']}")
-        if p["h_min_m"] > p["h_max_m"]:
-            raise ValueError(f"h_min_m must be <= h_max_m, got {p['h_min_m']} and "
-                             f"{p['h_max_m']}")
+        check_bpp_annulus(p)
         if p["gps"] == "none" and p["galileo"] == "none":
             raise ValueError("gps and galileo are both 'none': the map needs at least one "
                              "constellation")
@@ -672,6 +661,7 @@ class AvailabilityMap(SweepStudy):
                    "viridis", (0.0, 100.0)),
                   ("vpl_995_m", ds["vpl_995_m"].values, "99.5 % VPL (m)", "magma_r", None),
                   ("hpl_995_m", ds["hpl_995_m"].values, "99.5 % HPL (m)", "magma_r", None)]
+        x_edges, y_edges = cell_edges(lons, log=False), cell_edges(lats, log=False)
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), layout="constrained")
         for ax, (_, v, label, cmap, lim) in zip(axes, panels, strict=True):
             finite = v[np.isfinite(v)]
@@ -680,12 +670,12 @@ class AvailabilityMap(SweepStudy):
             else:
                 vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
                 norm = Normalize(0.0, max(vmax, 1e-9))
-            im = ax.pcolormesh(_edges(lons), _edges(lats), np.where(np.isfinite(v), v, np.nan),
+            im = ax.pcolormesh(x_edges, y_edges, np.where(np.isfinite(v), v, np.nan),
                                cmap=cmap, norm=norm, shading="flat")
             for ln in lines:
                 ax.plot(ln[:, 0], ln[:, 1], color="k", lw=0.5)
-            ax.set_xlim(_edges(lons)[[0, -1]])
-            ax.set_ylim(_edges(lats)[[0, -1]])
+            ax.set_xlim(x_edges[[0, -1]])
+            ax.set_ylim(y_edges[[0, -1]])
             ax.set_xlabel("longitude (deg)")
             ax.set_ylabel("latitude (deg)")
             ax.set_title(label + ("" if lim else " (grey: unavailable > 0.5 %)"), fontsize=9)
@@ -700,11 +690,3 @@ class AvailabilityMap(SweepStudy):
         plt.close(fig)
         return [path]
 
-
-def _edges(x):
-    """Cell edges around centres x (degrees)."""
-    x = np.asarray(x, float)
-    if x.size == 1:
-        return np.array([x[0] - 0.5, x[0] + 0.5])
-    mid = (x[1:] + x[:-1]) / 2
-    return np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])

@@ -38,6 +38,16 @@ def in_range(lo, hi):
     return lambda name, v: check_range(name, v, lo, hi)
 
 
+def parse_choice(*choices):
+    """A parameter taking one of ``choices`` (strings)."""
+    def parse(name, v):
+        v = str(v).strip()
+        if v not in choices:
+            raise ValueError(f"{name} must be one of {', '.join(choices)}, got {v!r}")
+        return v
+    return parse
+
+
 #: the value of a ``recording`` parameter that means "synthesize, replay nothing"
 NO_RECORDING = "none"
 

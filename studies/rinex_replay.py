@@ -53,6 +53,7 @@ from oaraim.studies.base import (
     count,
     in_range,
     non_negative,
+    parse_choice,
     positive,
     probability,
 )
@@ -99,15 +100,6 @@ def parse_truth(name, v):
         raise ValueError(f"{name} must be a point near the Earth's surface (|X| between 6,200 "
                          f"and 6,500 km), got {v!r} (|X| = {r / 1e3:.1f} km)")
     return xyz
-
-
-def parse_choice(*choices):
-    def parse(name, v):
-        v = str(v).strip()
-        if v not in choices:
-            raise ValueError(f"{name} must be one of {', '.join(choices)}, got {v!r}")
-        return v
-    return parse
 
 
 def data_files(obs, nav):

@@ -272,7 +272,7 @@ class Fig4HplMaps(SweepStudy):
         red_cmap = ListedColormap(["tab:red"])
         for ax, n in zip(axes.ravel(), n_sops, strict=False):
             v = red.sel(n_sops=n).values  # (p_s, sigma)
-            xs, ys = _edges(sig, log=False), _edges(p_s, log=True)
+            xs, ys = cell_edges(sig, log=False), cell_edges(p_s, log=True)
             im = ax.pcolormesh(xs, ys, np.where(v > 0, v, np.nan), cmap="viridis", vmin=0,
                                vmax=vmax, shading="flat")
             ax.pcolormesh(xs, ys, np.where(v <= 0, 1.0, np.nan), cmap=red_cmap, shading="flat")
@@ -292,7 +292,7 @@ class Fig4HplMaps(SweepStudy):
         return [path]
 
 
-def _edges(x, log):
+def cell_edges(x, log):
     """Cell edges for pcolormesh around centres x (geometric means on a log axis)."""
     x = np.asarray(x, float)
     if x.size == 1:
