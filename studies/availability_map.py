@@ -577,6 +577,13 @@ class AvailabilityMap(SweepStudy):
         """Realizations per latitude row: longitudes x epochs (not a sample size)."""
         return len(params["lon_deg"]) * len(self.epochs(params))
 
+    def run(self, params, realizations, seed, progress=None):
+        fixed = self.fixed_realizations(params)
+        if realizations != fixed:
+            raise ValueError(f"{self.name}: the grid sets the realizations ({fixed:,} per "
+                             f"latitude: longitudes x epochs), got {realizations:,}")
+        return super().run(params, realizations, seed, progress)
+
     def kernel(self, params, coords):
         return MapRow(params, coords["lat_deg"])
 

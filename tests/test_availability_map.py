@@ -266,4 +266,31 @@ def test_broadcast_file_sky_runs_from_its_day(shared_data):
     res = STUDY.run(p, STUDY.fixed_realizations(p), 0)
     n = res.dataset["n_gnss"].values
     assert 5 <= n.min() and n.max() <= 13
-    assert res.metrics["availability_mean_pct"] < 100.0  # GPS alone misses LPV-200 at times
+    assert np.all(res.dataset["n_sops"].values == 0) and res.metrics["gnss_slots"] == n.max()
+
+
+def test_coastlines_from_geojson_are_read_and_drawn(tmp_path, small):
+    """A GeoJSON of a LineString and a Polygon gives two lon/lat polylines; the maps draw
+    them; a file without line geometry is refused naming the parameter."""
+    f = tmp_path / "coast.geojson"
+    f.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "LineString",
+                                         "coordinates": [[-10, 40], [0, 45], [10, 50]]}},
+        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [
+            [[100, -10], [120, -10], [120, 10], [100, -10]]]}},
+        {"type": "Feature", "geometry": {"type": "Point", "coordinates": [0, 0]}}]}))
+    lines = am.read_lines(f)
+    assert [ln.shape for ln in lines] == [(3, 2), (4, 2)]
+    assert lines[0][1].tolist() == [0.0, 45.0]
+    p = STUDY.validate({**SMALL, "coastlines": str(f)})
+    assert p["coastlines"] == str(f.resolve())
+    bad = tmp_path / "points.geojson"
+    bad.write_text(json.dumps({"type": "Point", "coordinates": [0, 0]}))
+    with pytest.raises(ValueError, match="coastlines must be 'none' or a GeoJSON"):
+        STUDY.validate({"coastlines": str(bad)})
+    _, res = small
+    out = tmp_path / "plot"
+    out.mkdir()
+    res.dataset.assign_attrs(coastlines=str(f)).to_zarr(out / "data.zarr",
+                                                         consolidated=False)
+    assert STUDY.plot(out) == [f"{out}/availability_maps.png"]

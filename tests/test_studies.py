@@ -113,12 +113,18 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          # a realization is a noise draw of the drive: 5 s of it; the UAV: 300 epochs, no
          # exclusion replay (detect_and_exclude costs ~50 ms per epoch on 2 cores)
          "seed001-vehicle": {"duration_s": "5"},
-         "seed004-uav": {"n_epochs": "300", "exclusion": "false"}}
+         "seed004-uav": {"n_epochs": "300", "exclusion": "false"},
+         # its realizations are the grid (longitudes x epochs): 2 rows x 2 users x 4 epochs
+         "availability-map": {"lat_deg": "-35,50", "lon_deg": "0,140", "duration_s": "14400",
+                              "step_s": "3600"}}
 
 
-def _n(study, n):
+def _n(study, n, params=None):
     """Realizations for the generic tests: ``study.test_realizations`` caps them where one
-    realization is expensive (a whole EKF drive run)."""
+    realization is expensive (a whole EKF drive run); a study whose grid sets them
+    (``fixed_realizations``) gets exactly those."""
+    if hasattr(study, "fixed_realizations"):
+        return study.fixed_realizations(study.validate(params or {}))
     return min(n, getattr(study, "test_realizations", n))
 
 
@@ -128,8 +134,8 @@ def test_study_results_bit_identical_for_any_chunk_size(name, request):
     small = SMALL.get(name, {})
     if getattr(study, "requires_data", False) or study.data_files(study.validate(small)):
         request.getfixturevalue("shared_data")  # skips (or fails under OARAIM_REQUIRE_DATA)
-    a = study.run(study.validate({"chunk": 1024, **small}), _n(study, 3000), 4, None)
-    b = study.run(study.validate({"chunk": 4096, **small}), _n(study, 3000), 4, None)
+    a = study.run(study.validate({"chunk": 1024, **small}), _n(study, 3000, small), 4, None)
+    b = study.run(study.validate({"chunk": 4096, **small}), _n(study, 3000, small), 4, None)
     xr.testing.assert_identical(a.dataset, b.dataset)
     assert json.dumps(a.metrics, default=str) == json.dumps(b.metrics, default=str)
 
@@ -141,7 +147,7 @@ def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request)
             study.data_files(study.validate(SMALL.get(name, {}))):
         request.getfixturevalue("shared_data")
     sets = [f"{k}={v}" for k, v in SMALL.get(name, {}).items()]
-    n = _n(STUDIES[name], 2048)
+    n = _n(STUDIES[name], 2048, SMALL.get(name))
     summary, sdir, figures, _ = run_study(name, realizations=n, out=tmp_path, sets=sets,
                                           show_progress=False)
     assert (sdir / "data.zarr").is_dir()
