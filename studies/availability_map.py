@@ -49,6 +49,7 @@ from oaraim.studies.base import (
     check_bpp_annulus,
     count,
     in_range,
+    keyword_or_file,
     non_negative,
     parse_choice,
     positive,
@@ -118,18 +119,8 @@ def parse_grid(lo, hi):
 def parse_orbits(default_file):
     """'auto' (``default_file`` from the data registry, fetched if missing), 'nominal' (the
     built-in constellation), 'none', or a YUMA / SEM almanac or RINEX navigation file."""
-
-    def parse(name, v):
-        s = str(v).strip()
-        if s in ("auto", "nominal", "none"):
-            return s
-        p = Path(s).expanduser()
-        if not p.is_file():
-            raise ValueError(f"{name} must be 'auto' ({default_file}), 'nominal', 'none' or an "
-                             f"existing almanac / navigation file, got {v!r} (not found)")
-        return str(p.resolve())
-
-    return parse
+    return keyword_or_file(("auto", "nominal", "none"),
+                           f"almanac or navigation file ('auto': {default_file})")
 
 
 def parse_limit(name, v):

@@ -38,6 +38,24 @@ def in_range(lo, hi):
     return lambda name, v: check_range(name, v, lo, hi)
 
 
+def keyword_or_file(keywords, what):
+    """A parameter that is one of ``keywords`` or the path of an existing file (``what`` names
+    the kind of file in the error); returns the keyword or the resolved path."""
+    allowed = ", ".join(repr(k) for k in keywords)
+
+    def parse(name, v):
+        s = str(v).strip()
+        if s in keywords:
+            return s
+        p = Path(s).expanduser()
+        if not p.is_file():
+            raise ValueError(f"{name} must be {allowed} or an existing {what}, got {v!r} "
+                             "(not found)")
+        return str(p.resolve())
+
+    return parse
+
+
 def parse_choice(*choices):
     """A parameter taking one of ``choices`` (strings)."""
     def parse(name, v):

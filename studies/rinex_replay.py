@@ -52,6 +52,7 @@ from oaraim.studies.base import (
     StudyResult,
     count,
     in_range,
+    keyword_or_file,
     non_negative,
     parse_choice,
     positive,
@@ -71,16 +72,8 @@ SLOTS = (12, 16, 24, 32)
 N_PASSES = 3
 
 
-def parse_path(name, v):
-    """'auto' (the shared data file) or an existing file."""
-    v = str(v).strip()
-    if v == "auto":
-        return v
-    p = Path(v).expanduser()
-    if not p.is_file():
-        raise ValueError(f"{name} must be 'auto' or an existing RINEX file, got {v!r} "
-                         "(not found)")
-    return str(p.resolve())
+#: 'auto' (the shared data file) or an existing file
+parse_path = keyword_or_file(("auto",), "RINEX file")
 
 
 def parse_truth(name, v):

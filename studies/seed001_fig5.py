@@ -41,6 +41,7 @@ from oaraim.studies.base import (
     check_bpp_annulus,
     count,
     in_range,
+    keyword_or_file,
     non_negative,
     positive,
     probability,
@@ -78,16 +79,8 @@ def parse_receiver(name, v):
     return (lat, lon, h)
 
 
-def parse_nav(name, v):
-    """'auto' (the study's default real file), 'nominal' (built-in constellation), or a path."""
-    v = str(v).strip()
-    if v in ("auto", "nominal"):
-        return v
-    p = Path(v).expanduser()
-    if not p.is_file():
-        raise ValueError(f"{name} must be 'auto', 'nominal' or an existing RINEX navigation "
-                         f"file, got {v!r} (not found)")
-    return str(p.resolve())
+#: 'auto' (the study's default real file), 'nominal' (built-in constellation), or a path
+parse_nav = keyword_or_file(("auto", "nominal"), "RINEX navigation file")
 
 
 def parse_date(name, v):
