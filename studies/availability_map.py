@@ -39,7 +39,7 @@ from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.mhss import _protection_levels, required_order
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
-from oaraim.geometry.sky import resolve_source
+from oaraim.geometry.sky import look_angles, resolve_source
 from oaraim.mc.sweep import Values
 from oaraim.studies import seed001_fig5 as fig5
 from oaraim.studies.base import (
@@ -234,28 +234,17 @@ def constellation_orbits(gps, galileo, duration_s, step_s):
     return ecef, ok, cons, sv, t_off, "; ".join(desc)
 
 
-def look(lat_rad, lon_rad, h_m, sat_ecef_m, sat_ok, mask_rad):
-    """Az, el and validity ``(..., S)`` of satellites ``(..., S, 3)`` seen from geodetic
-    points ``(...)`` (element-wise: each point has its own epoch's satellites)."""
-    rx = geometry.geodetic_to_ecef(lat_rad, lon_rad, h_m)
-    r = geometry.enu_rotation(lat_rad, lon_rad)
-    d = sat_ecef_m - rx[..., None, :]
-    enu = jnp.einsum("...ik,...sk->...si", r, d)
-    e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
-    az = jnp.mod(jnp.arctan2(e, n), 2.0 * jnp.pi)
-    el = jnp.arctan2(u, jnp.hypot(e, n))
-    return az, el, sat_ok & (el >= mask_rad)
-
-
 @functools.lru_cache(maxsize=8)
 def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m):
     """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel."""
     ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s)
-    f = jax.jit(lambda la, lo: jnp.max(jnp.sum(look(
-        la, lo, h_m, jnp.asarray(ecef)[None], jnp.asarray(ok)[None],
-        np.deg2rad(mask_deg))[2], -1)))
     lo = np.deg2rad(np.asarray(lons))
-    return max(int(f(np.deg2rad(la) * np.ones((len(lons), 1)), lo[:, None])) for la in lats)
+    most = 0
+    for la in lats:
+        rx = geometry.geodetic_to_ecef(np.deg2rad(la), lo, h_m)  # (n_lon, 3)
+        vis = look_angles(rx, ecef, ok, np.deg2rad(mask_deg))[3]  # (n_lon, T, S)
+        most = max(most, int(jnp.max(jnp.sum(vis, -1))))
+    return most
 
 
 def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
@@ -300,7 +289,9 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
     n_lon = lons_rad.shape[0]
     lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
     t_i = idx % n_t
-    az, el, vis = look(lat_rad, lons_rad[lon_i], h_m, sat_ecef[t_i], sat_ok[t_i], mask_rad)
+    rx = geometry.geodetic_to_ecef(lat_rad, lons_rad[lon_i], h_m)  # (B, 3)
+    az, el, _, vis = jax.vmap(lambda r, e, v: tuple(x[0] for x in look_angles(
+        r, e[None], v[None], mask_rad)))(rx, sat_ecef[t_i], sat_ok[t_i])  # (B, S) each
     order = jnp.argsort(~vis, axis=-1, stable=True)[:, :n_slots]
     take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
     az, el, vis = take(az), take(el), take(vis)
@@ -567,13 +558,6 @@ class AvailabilityMap(SweepStudy):
     def fixed_realizations(self, params):
         """Realizations per latitude row: longitudes x epochs (not a sample size)."""
         return len(params["lon_deg"]) * len(self.epochs(params))
-
-    def run(self, params, realizations, seed, progress=None):
-        fixed = self.fixed_realizations(params)
-        if realizations != fixed:
-            raise ValueError(f"{self.name}: the grid sets the realizations ({fixed:,} per "
-                             f"latitude: longitudes x epochs), got {realizations:,}")
-        return super().run(params, realizations, seed, progress)
 
     def kernel(self, params, coords):
         return MapRow(params, coords["lat_deg"])

@@ -170,6 +170,11 @@ class Study:
     def check(self, params: dict) -> None:
         """Cross-parameter checks (e.g. d_min < d_max); raise ValueError naming the fields."""
 
+    def fixed_realizations(self, params: dict) -> int | None:
+        """Realizations per cell when the parameters set them (a study whose realizations are
+        the elements of a grid, not samples), else None (``--realizations`` chooses)."""
+        return None
+
     def run(self, params: dict, realizations: int, seed: int, progress) -> StudyResult:
         raise NotImplementedError
 
@@ -229,6 +234,10 @@ class SweepStudy(Study):
 
         from oaraim.studies.execute import run_sweep_study
 
+        fixed = self.fixed_realizations(params)
+        if fixed is not None and realizations != fixed:
+            raise ValueError(f"{self.name}: the parameters set the realizations ({fixed:,} per "
+                             f"cell), got {realizations:,}")
         with tempfile.TemporaryDirectory(prefix="oaraim-sweep-") as tmp:
             result, _ = run_sweep_study(self, params, realizations, seed, tmp, progress=False)
         return result

@@ -84,7 +84,7 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
     study = get_study(name)
     _check_sweep_flags(study, resume, workers, scheduler)
     params = study.validate(parse_sets(sets))
-    fixed = study.fixed_realizations(params) if hasattr(study, "fixed_realizations") else None
+    fixed = study.fixed_realizations(params)
     if fixed is not None:
         if realizations is not None and realizations != fixed:
             raise ValueError(f"{study.name} sets its realizations from its grid ({fixed:,} per "

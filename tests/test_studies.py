@@ -123,9 +123,8 @@ def _n(study, n, params=None):
     """Realizations for the generic tests: ``study.test_realizations`` caps them where one
     realization is expensive (a whole EKF drive run); a study whose grid sets them
     (``fixed_realizations``) gets exactly those."""
-    if hasattr(study, "fixed_realizations"):
-        return study.fixed_realizations(study.validate(params or {}))
-    return min(n, getattr(study, "test_realizations", n))
+    fixed = study.fixed_realizations(study.validate(params or {}))
+    return fixed if fixed is not None else min(n, getattr(study, "test_realizations", n))
 
 
 @pytest.mark.parametrize("name", list(STUDIES))
