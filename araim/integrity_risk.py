@@ -585,22 +585,28 @@ def measured_risk(table: RiskTable, include_wrong_exclusion=False):
     p = np.asarray(e.p_md) + (np.asarray(e.p_we) if include_wrong_exclusion else 0.0)
     up = np.asarray(e.upper_md) + (np.asarray(e.p_we) + 1.96 * np.asarray(e.se_we)
                                    if include_wrong_exclusion else 0.0)
+    return risk_sum(table.kind, np.asarray(table.active), np.asarray(table.monitored),
+                    np.asarray(table.mode), np.asarray(table.prior), p, up)
+
+
+def risk_sum(kind, active, monitored, mode, prior, p, upper):
+    """``measured_risk`` on arrays: kind (S,); active, monitored, mode, prior (S, 2); p and
+    its upper bound (S, X, 2) -> (risk (2,), upper (2,), worst (S, 2), worst_x (S, 2))."""
+    p = np.where(active[:, None], p, 0.0)
+    upper = np.where(active[:, None], upper, 0.0)
     worst_x = np.argmax(p, axis=1)  # (S, 2)
     worst = np.take_along_axis(p, worst_x[:, None], 1)[:, 0]
-    worst_up = np.take_along_axis(up, worst_x[:, None], 1)[:, 0]
-    active = np.asarray(table.active)
-    mon = np.asarray(table.monitored) & active
-    mode = np.asarray(table.mode)
-    prior = np.asarray(table.prior)
-    risk, upper = np.zeros(2), np.zeros(2)
+    worst_up = np.take_along_axis(upper, worst_x[:, None], 1)[:, 0]
+    mon = monitored & active
+    ff = np.asarray(kind) == FAULT_FREE
+    risk, up = np.zeros(2), np.zeros(2)
     for d in range(2):
-        ff = table.kind == FAULT_FREE
         risk[d] = worst[ff, d].sum()
-        upper[d] = worst_up[ff, d].sum()
+        up[d] = worst_up[ff, d].sum()
         faulty = mon[:, d] & ~ff
         for k in np.unique(mode[faulty, d]):
             sel = faulty & (mode[:, d] == k)
             j = np.flatnonzero(sel)[np.argmax(worst[sel, d])]
             risk[d] += prior[j, d] * worst[j, d]
-            upper[d] += prior[j, d] * worst_up[j, d]
-    return risk, upper, worst, worst_x
+            up[d] += prior[j, d] * worst_up[j, d]
+    return risk, up, worst, worst_x

@@ -1,6 +1,7 @@
 """All studies by name."""
 
 from oaraim.studies.availability_map import AvailabilityMap
+from oaraim.studies.integrity_risk import IntegrityRisk
 from oaraim.studies.rinex_replay import RinexReplay
 from oaraim.studies.seed000_ekf_raim import Seed000EkfRaim
 from oaraim.studies.seed001_fig3 import Fig3Elevation
@@ -16,7 +17,7 @@ from oaraim.studies.seed004_uav import Seed004Uav
 STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), Fig3OneSop(),
                                 Fig4HplMaps(), Theorems(), RinexReplay(), Seed000EkfRaim(),
                                 Seed002Outlier(), Seed001Vehicle(), Seed004Uav(),
-                                AvailabilityMap())}
+                                AvailabilityMap(), IntegrityRisk())}
 
 
 def get_study(name):

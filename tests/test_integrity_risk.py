@@ -44,14 +44,13 @@ def cases():
     return c, rng, _maps(c, araim.BUDGET_SEED004_TABLE_I), _maps(c, WEAK)
 
 
-@pytest.mark.parametrize("weak", [False, True], ids=["table-i", "weak-budget"])
-def test_maps_reproduce_detect_and_exclude(cases, weak):
+def test_maps_reproduce_detect_and_exclude(cases):
     """Detection, the excluded mode and both HMI events from the maps equal those derived from
     detect_and_exclude (its position and PLs) on noise at 1-5 sigma plus a bias of 0-30 m on
-    one GPS satellite: every branch (nothing detected, excluded, failed) occurs, and under the
-    weak budget both kinds of HMI."""
-    c, rng, maps_t, maps_w = cases
-    maps, budget = (maps_w, WEAK) if weak else (maps_t, araim.BUDGET_SEED004_TABLE_I)
+    one GPS satellite: every branch (nothing detected, excluded, failed) occurs, and both kinds
+    of HMI (the weak budget: at Table I's PLs HMI is too rare to see here)."""
+    c, rng, _, maps = cases
+    budget = WEAK
     n = 48
     y = rng.normal(0.0, np.sqrt(c["var_int"])[:, None, :], (N_GEOM, n, L))
     y *= rng.uniform(1.0, 5.0, (N_GEOM, n, 1))
@@ -77,8 +76,7 @@ def test_maps_reproduce_detect_and_exclude(cases, weak):
     np.testing.assert_array_equal(np.asarray(out.we_v), det & (mode >= 0) & hmi_v)
     assert (~det).sum() > 10 and (det & (mode >= 0)).sum() > 10
     assert (det & (mode < 0)).sum() > 0
-    if weak:
-        assert np.asarray(out.md_v).sum() > 0 and np.asarray(out.we_h).sum() > 0
+    assert np.asarray(out.md_v).sum() > 0 and np.asarray(out.we_h).sum() > 0
 
 
 def _closed_form_ff_v(m, budget):
@@ -114,7 +112,7 @@ def test_fault_free_vertical_risk_closed_form(cases, weak):
 def test_importance_sampling_agrees_with_crude_monte_carlo(cases):
     """Weak budget, geometry 0: fault-free and the single-source fault with the largest
     vertical slope at A_det and 1.2 A_det, both directions: IS (4,000 samples) and crude Monte
-    Carlo (200,000; P ~1e-3 to 0.3) agree within 4 combined standard errors; IS needs far fewer
+    Carlo (100,000; P ~5e-4 to 0.3) agree within 4 combined standard errors; IS needs far fewer
     samples for the same relative error (variance per sample)."""
     _, _, _, maps_w = cases
     m = _pick(maps_w, 0)
@@ -126,14 +124,14 @@ def test_importance_sampling_agrees_with_crude_monte_carlo(cases):
             k = jax.random.key(int(100 * kind + 10 * x + d))
             _, _, a = ir.scenario_estimate(m, kind, src, -1, d, x, k, n_samples=4000)
             _, _, b = ir.scenario_estimate(m, kind, src, -1, d, x, jax.random.fold_in(k, 7),
-                                           n_samples=200_000, crude=True)
+                                           n_samples=100_000, crude=True)
             pa, sa, pb, sb = (float(v) for v in (a.p_md, a.se_md, b.p_md, b.se_md))
             # (fault-free horizontal: ~1e-5 here, the HPL adds the east and north PLs; crude
             # sees a few hits and the comparison is loose but still made)
             assert int(b.hits_md) >= (1 if kind == ir.FAULT_FREE and d == ir.HORIZONTAL
-                                      else 50), (kind, d, x, pb)
+                                      else 30), (kind, d, x, pb)
             assert abs(pa - pb) <= 4 * np.hypot(sa, sb), (kind, d, x, pa, sa, pb, sb)
-            gains.append(pb * (1 - pb) / (4000 * sa**2))
+            gains.append(pb * (1 - pb) / (4000 * sa**2))  # crude / IS variance per sample
             # wrong-exclusion HMI, estimated from the same samples, agrees too
             pa, sa, pb, sb = (float(v) for v in (a.p_we, a.se_we, b.p_we, b.se_we))
             assert abs(pa - pb) <= 4 * np.hypot(sa, sb) + 1e-12, (kind, d, x, "we", pa, pb)

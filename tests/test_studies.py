@@ -116,7 +116,12 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          "seed004-uav": {"n_epochs": "300", "exclusion": "false"},
          # its realizations are the grid (longitudes x epochs): 2 rows x 2 users x 4 epochs
          "availability-map": {"lat_deg": "-35,50", "lon_deg": "0,140", "duration_s": "14400",
-                              "step_s": "3600"}}
+                              "step_s": "3600"},
+         # a realization is an importance-sampled P(HMI): one geometry, two magnitudes, few
+         # samples; the crude cross-check small
+         "integrity-risk": {"n_sops": "2", "geometries": "1", "x_grid": "0,1",
+                            "samples": "200", "ce_samples": "100", "ce_rounds": "1",
+                            "crude_samples": "2000"}}
 
 
 def _n(study, n, params=None):
