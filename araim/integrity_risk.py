@@ -24,13 +24,17 @@ for the horizontal the principal direction of S^(0)_EN restricted to E, or of th
 error covariance when E is empty). For one source that is the sign of its slope; a common bias
 on a constellation moves nothing (its clock absorbs it) and f^ is orthogonal to it. Magnitudes
 are x A_det with A_det the magnitude at which the mean separation of the fault's own monitored
-mode reaches its threshold (the PL where the scenario is not monitored). The nominal bias is
+mode reaches its threshold (the PL where the scenario is not monitored), and x A_PL with A_PL
+the magnitude at which the fault alone puts the mean error along u on the PL: HMI needs the
+error beyond the PL and no alert, so the worst magnitude lies near one of the two scales (a
+mode whose threshold is far above the PL, e.g. a subset with a poor geometry, peaks near
+A_PL, far below its A_det). The nominal bias is
 b_nom with the sign of u^T S^(0) ("worst") or zero.
 
 **Measured risk** of a geometry and direction: each scenario is assigned to the monitored mode
 with the smallest exclusion set containing E (the grouping of ``araim.fault_modes``), and
 
-    R = P(HMI | fault-free) + sum_k P_k max_{scenarios -> k} max_x P(HMI | scenario, x A_det),
+    R = P(HMI | fault-free) + sum_k P_k max_{scenarios -> k} max_A P(HMI | scenario, A),
 
 against the allocation of the PL equations, PHMI (1 - P_NM / (PHMI_V + PHMI_H)) (seed 004 eqs.
 14-16; the horizontal one is PHMI_H, split evenly between east and north there). The maximum
@@ -74,8 +78,8 @@ DEFENSIVE = 0.1
 #: scenario kinds (``scenario_slots``)
 FAULT_FREE, SINGLE, CONSTELLATION, PAIR = 0, 1, 2, 3
 KIND_NAMES = ("fault-free", "single source", "constellation", "two sources")
-#: magnitudes of the injected fault, in units of A_det (module docstring)
-DEFAULT_X_GRID = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0, 3.0)
+#: magnitudes of the injected fault, in units of A_det and of A_PL (module docstring)
+DEFAULT_X_GRID = (0.0, 0.25, 0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0)
 HORIZONTAL, VERTICAL = 0, 1
 
 
@@ -280,6 +284,7 @@ class Injection(NamedTuple):
     monitored: jax.Array  # the scenario is covered by a monitored mode
     prior: jax.Array  # P_k* (1 for fault-free)
     a_det_m: jax.Array  # magnitude at which the mode's mean separation reaches T (or the PL)
+    a_pl_m: jax.Array  # magnitude at which the fault's mean error along u reaches the PL
     pl_m: jax.Array  # HPL or VPL
 
 
@@ -346,7 +351,9 @@ def injection(maps: MonitorMaps, kind, source, const, direction, worst_bias=True
     a_pl = jnp.where(u_slope > 1e-12, pl / jnp.where(u_slope > 1e-12, u_slope, 1.0), 0.0)
     a_det = jnp.where(is_ff, 0.0, jnp.where(monitored & jnp.isfinite(a_mode), a_mode, a_pl))
     a_det = jnp.where(jnp.isfinite(a_det), a_det, 0.0)
-    return Injection(active, fault_set, u, fault_dir, bias, mode, monitored, prior, a_det, pl)
+    a_pl = jnp.where(is_ff | ~jnp.isfinite(a_pl), 0.0, a_pl)
+    return Injection(active, fault_set, u, fault_dir, bias, mode, monitored, prior, a_det, a_pl,
+                     pl)
 
 
 # ------------------------------------------------------------------------ importance sampling
@@ -480,14 +487,15 @@ class RiskTable(NamedTuple):
     mode: jax.Array  # (S, 2)
     prior: jax.Array  # (S, 2)
     a_det_m: jax.Array  # (S, 2)
+    a_pl_m: jax.Array  # (S, 2)
     magnitude_m: jax.Array  # (S, X, 2)
     estimate: Estimate  # fields (S, X, 2)
 
 
-def _one(maps, kind, source, const, direction, x, key, n_samples, ce_samples, ce_rounds,
+def _one(maps, kind, source, const, direction, x, scale, key, n_samples, ce_samples, ce_rounds,
          crude, worst_bias, exclusion):
     inj = injection(maps, kind, source, const, direction, worst_bias)
-    a = jnp.where(inj.active, x * inj.a_det_m, 0.0)
+    a = jnp.where(inj.active, x * jnp.where(scale == 0, inj.a_det_m, inj.a_pl_m), 0.0)
     est = importance_estimate(maps, inj, a, direction, key, n_samples=n_samples,
                               ce_samples=ce_samples, ce_rounds=ce_rounds, crude=crude,
                               exclusion=exclusion)
@@ -503,21 +511,23 @@ def _risk_table(maps, key, x_grid, n_constellations, n_samples, ce_samples, ce_r
                 worst_bias, exclusion):
     L = maps.valid.shape[-1]
     kind, source, const = (jnp.asarray(a) for a in scenario_slots(L, n_constellations))
-    S, X = kind.shape[0], x_grid.shape[0]
+    S, X = kind.shape[0], 2 * x_grid.shape[0]  # x A_det, then x A_PL
     si, xi, di = (a.ravel() for a in jnp.meshgrid(jnp.arange(S), jnp.arange(X), jnp.arange(2),
                                                   indexing="ij"))
+    xs = jnp.concatenate([x_grid, x_grid])
 
     def one(args):
         s, x, d = args
         k = jax.random.fold_in(jax.random.fold_in(jax.random.fold_in(key, s), x), d)
-        return _one(maps, kind[s], source[s], const[s], d, x_grid[x], k, n_samples, ce_samples,
-                    ce_rounds, crude, worst_bias, exclusion)
+        return _one(maps, kind[s], source[s], const[s], d, xs[x], x // x_grid.shape[0], k,
+                    n_samples, ce_samples, ce_rounds, crude, worst_bias, exclusion)
 
     inj, a, est = jax.lax.map(one, (si, xi, di))
     shp = lambda v: v.reshape((S, X, 2) + v.shape[1:])  # noqa: E731
     first_x = lambda v: shp(v)[:, 0]  # noqa: E731
     return (first_x(inj.active), first_x(inj.monitored), first_x(inj.mode),
-            first_x(inj.prior), first_x(inj.a_det_m), shp(a), jax.tree.map(shp, est))
+            first_x(inj.prior), first_x(inj.a_det_m), first_x(inj.a_pl_m), shp(a),
+            jax.tree.map(shp, est))
 
 
 _one_jit = jax.jit(_one, static_argnames=_SIZES)
@@ -534,26 +544,31 @@ def _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias):
 
 
 def scenario_estimate(maps: MonitorMaps, kind, source, constellation, direction, x, key, *,
-                      n_samples=2000, ce_samples=1000, ce_rounds=2, crude=False,
+                      scale="det", n_samples=2000, ce_samples=1000, ce_rounds=2, crude=False,
                       nominal_bias="worst", exclusion=True):
     """P(HMI) of ONE scenario (``kind`` FAULT_FREE / SINGLE (``source``) / CONSTELLATION or
-    PAIR (``constellation``)), ``direction`` HORIZONTAL or VERTICAL, magnitude ``x`` A_det, of
-    one geometry. Returns (Injection, magnitude (m), Estimate)."""
+    PAIR (``constellation``)), ``direction`` HORIZONTAL or VERTICAL, magnitude ``x`` A_det
+    (``scale="det"``) or ``x`` A_PL (``scale="pl"``), of one geometry. Returns (Injection,
+    magnitude (m), Estimate)."""
+    if scale not in ("det", "pl"):
+        raise ValueError(f"scale must be 'det' or 'pl', got {scale!r}")
     sizes = _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias)
     if direction not in (HORIZONTAL, VERTICAL):
         raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1), got {direction!r}")
     if not np.isfinite(x) or x < 0:
         raise ValueError(f"x (magnitude in units of A_det) must be >= 0, got {x!r}")
     return _one_jit(maps, jnp.asarray(kind), jnp.asarray(source), jnp.asarray(constellation),
-                    jnp.asarray(direction), jnp.asarray(float(x)), key, *sizes, bool(crude),
+                    jnp.asarray(direction), jnp.asarray(float(x)),
+                    jnp.asarray(0 if scale == "det" else 1), key, *sizes, bool(crude),
                     nominal_bias == "worst", bool(exclusion))
 
 
 def risk_table(maps: MonitorMaps, key, x_grid=DEFAULT_X_GRID, *, n_samples=2000,
                ce_samples=1000, ce_rounds=2, crude=False, nominal_bias="worst",
                exclusion=True) -> RiskTable:
-    """P(HMI | scenario, x A_det) for every scenario slot, magnitude and direction of ONE
-    geometry (``maps`` without batch axes). ``crude=True`` for plain Monte Carlo."""
+    """P(HMI | scenario, magnitude) for every scenario slot, magnitude and direction of ONE
+    geometry (``maps`` without batch axes): 2 X magnitudes, ``x_grid`` x A_det then ``x_grid``
+    x A_PL. ``crude=True`` for plain Monte Carlo."""
     n_samples, ce_samples, ce_rounds = _check_options(maps, n_samples, ce_samples, ce_rounds,
                                                       nominal_bias)
     x = np.asarray(x_grid, float)

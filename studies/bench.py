@@ -290,6 +290,68 @@ def bench_availability_map(sets=None, workers=None):
             "workers": workers, "threads": sweep.threads, "host": host_info()}
 
 
+def bench_integrity_risk(samples=200_000, ref_samples=200, repeats=3):
+    """``araim.integrity_risk`` on the MHSS bench geometry (9 GPS + 4 SOPs, Table I): the
+    receiver's decisions per second from the linear maps (detection, exclusion, both HMI
+    events) against ``reference_mhss.detect_and_exclude_reference`` on the same residuals; one
+    geometry's full risk table; and the importance-sampling speed-up over crude Monte Carlo at
+    equal relative error on the fault-free vertical risk (crude: (1 - p) / (p r^2) samples at
+    its measured cost per sample)."""
+    from oaraim import araim
+    from oaraim.araim import integrity_risk as ir
+
+    x = mhss_bench_inputs(1)
+    budget = araim.BUDGET_SEED004_TABLE_I
+    args = (x["g"][0], x["constellation"][0], x["var_int_m2"][0], x["var_acc_m2"][0],
+            x["b_nom_m"][0], x["p_sat"][0], x["p_const"][0])
+    t0 = time.perf_counter()
+    maps = ir.monitor_maps(*args, budget, x["valid"][0], max_order=1)
+    jax.block_until_ready(maps)
+    t_maps = time.perf_counter() - t0
+    sig = np.sqrt(np.asarray(x["var_int_m2"][0]))
+    y = jax.random.normal(jax.random.key(1), (samples, sig.size)) * sig * 3.0
+    ev = jax.jit(ir.evaluate)
+    jax.block_until_ready(ev(maps, y))
+    t = _best_time(lambda: jax.block_until_ready(ev(maps, y)), repeats)
+    out = ev(maps, y)
+    ys = np.asarray(y[:ref_samples])
+    nargs = [np.asarray(a) for a in args]
+
+    def run_ref():
+        return [reference_mhss.detect_and_exclude_reference(*nargs, budget, ys[i],
+                                                            np.asarray(x["valid"][0]), 1)
+                for i in range(ref_samples)]
+
+    refs = []
+    t_ref = _best_time(lambda: refs.append(run_ref()), 1)
+    agree = float(np.mean([bool(r.detected) == bool(d) for r, d in
+                           zip(refs[-1], np.asarray(out.detected[:ref_samples]), strict=True)]))
+    key = jax.random.key(2)
+    jax.block_until_ready(ir.risk_table(maps, key))
+    t_table = _best_time(lambda: jax.block_until_ready(ir.risk_table(maps, key).estimate), 1)
+    # equal relative error: fault-free vertical P(HMI), IS vs crude at the measured costs
+    opts = dict(n_samples=2000, ce_samples=1000, ce_rounds=2)
+    est = lambda **kw: ir.scenario_estimate(  # noqa: E731
+        maps, ir.FAULT_FREE, -1, -1, ir.VERTICAL, 0.0, key, **kw)[2]
+    jax.block_until_ready(est(**opts))
+    t_is = _best_time(lambda: jax.block_until_ready(est(**opts)), repeats)
+    e = est(**opts)
+    p, rel = float(e.p_md), float(e.se_md) / float(e.p_md)
+    jax.block_until_ready(est(n_samples=samples, crude=True))
+    t_crude = _best_time(lambda: jax.block_until_ready(est(n_samples=samples, crude=True)),
+                         repeats)
+    crude_s = t_crude / samples * (1 - p) / (p * rel**2)
+    return {"samples": samples, "evaluate_s": t, "samples_per_s": samples / t,
+            "reference_samples": ref_samples, "reference_s": t_ref,
+            "reference_samples_per_s": ref_samples / t_ref,
+            "speedup": (samples / t) / (ref_samples / t_ref), "detection_agreement": agree,
+            "maps_s_compile_included": t_maps, "risk_table_s": t_table,
+            "scenario_slots": int(1 + sig.size + 4), "x_grid": len(ir.DEFAULT_X_GRID),
+            "ff_vertical_p": p, "ff_vertical_rel_error": rel, "is_s": t_is,
+            "crude_s_equal_rel_error": crude_s, "is_speedup_equal_rel_error": crude_s / t_is,
+            "host": host_info()}
+
+
 def _step(values):
     v = np.diff(np.asarray(values, float))
     return float(v.min()) if v.size else 0.0
@@ -355,6 +417,22 @@ def markdown_table(bench_json: dict) -> str:
                          f"users x {a['epochs']} epochs, {how}",
                          f"{a['wall_s']:.1f} s wall ({_rate(a['pl_per_s'], 'PL/s')})", "-",
                          "-", *host(a)))
+    if "integrity_risk" in bench_json:
+        r = bench_json["integrity_risk"]
+        rows.append(("MHSS detection + exclusion per residual sample, `araim.integrity_risk."
+                     "evaluate` (linear maps)", f"9 GPS + 4 SOPs, Table I, {r['samples']:,} "
+                     "samples, one geometry", _rate(r["samples_per_s"], "samples/s"),
+                     _rate(r["reference_samples_per_s"], "samples/s"), f"{r['speedup']:,.0f}x",
+                     *host(r)))
+        rows.append(("`araim.integrity_risk.risk_table`, one geometry",
+                     f"{r['scenario_slots']} scenarios x {r['x_grid']} magnitudes x 2 "
+                     "directions, 4,000 samples each", f"{r['risk_table_s']:.1f} s", "-", "-",
+                     *host(r)))
+        rows.append(("importance sampling vs crude Monte Carlo, equal relative error",
+                     f"fault-free vertical P(HMI) = {r['ff_vertical_p']:.1e}, relative error "
+                     f"{r['ff_vertical_rel_error']:.0%}", f"{r['is_s']:.2f} s",
+                     f"{r['crude_s_equal_rel_error']:.1e} s (crude)",
+                     f"{r['is_speedup_equal_rel_error']:.1e}x", *host(r)))
     head = ("| kernel | workload | throughput | NumPy reference | ratio | machine | date |\n"
             "|---|---|---|---|---|---|---|")
     return "\n".join([head] + ["| " + " | ".join(r) + " |" for r in rows])

@@ -260,6 +260,14 @@ def bench(
     out.print(f"availability-map ({a['service_level']}), {a['users']:,} users x {a['epochs']} "
               f"epochs: {a['wall_s']:.1f} s wall, compile included ({a['pl_per_s']:,.0f} PL/s; "
               f"target < 60 s for the world map)", highlight=False)
+    res["integrity_risk"] = r = b.bench_integrity_risk(samples=50_000 if quick else 200_000,
+                                                       ref_samples=50 if quick else 200)
+    out.print(f"integrity risk, MHSS decisions from the linear maps: {r['samples_per_s']:,.0f} "
+              f"samples/s; NumPy reference {r['reference_samples_per_s']:,.1f} samples/s -> "
+              f"{r['speedup']:,.0f}x (detections agree on {r['detection_agreement']:.0%}); one "
+              f"geometry's risk table {r['risk_table_s']:.1f} s; IS vs crude at equal relative "
+              f"error (P = {r['ff_vertical_p']:.1e}): {r['is_speedup_equal_rel_error']:.1e}x",
+              highlight=False)
     if dask_map:
         res["availability_map_dask"] = a = b.bench_availability_map(
             {"lat_deg": "-90:90:1", "lon_deg": "-180:179:1"}, workers=2)

@@ -139,8 +139,8 @@ def test_importance_sampling_agrees_with_crude_monte_carlo(cases):
 
 
 def test_injection_hand_values(cases):
-    """Single source: the fault is +-e_l with the sign of its slope, and at A_det the mean
-    separation of its own mode equals the threshold; constellation: the fault direction has no
+    """Single source: the fault is +-e_l with the sign of its slope, at A_det the mean
+    separation of its own mode equals the threshold and at A_PL the mean error the VPL; constellation: the fault direction has no
     component along a common bias (the clock absorbs it), and the PL bias is b_nom with the
     slope's sign."""
     _, _, maps, _ = cases
@@ -155,6 +155,8 @@ def test_injection_hand_values(cases):
     assert set(np.flatnonzero(np.asarray(m.excluded[k]))) == {l} and bool(inj.monitored)
     sep_mean = float(np.asarray(m.sep[k, 2]) @ (float(inj.a_det_m) * expect))
     assert abs(abs(sep_mean) - float(m.threshold_m[k, 2])) < 1e-9
+    # A_PL: the fault alone puts the mean vertical error on the VPL
+    assert abs(float(inj.a_pl_m) * abs(s0[2, l]) - float(m.vpl_m)) < 1e-9
     np.testing.assert_allclose(np.asarray(inj.bias_m), np.asarray(m.b_nom_m) * np.where(
         s0[2] >= 0, 1.0, -1.0))
     inj = ir.injection(m, ir.CONSTELLATION, -1, 0, ir.VERTICAL)
