@@ -162,8 +162,10 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
     return FDEResult(detected, excluded, mode, top.tau, position, pl, pl.status)
 
 
-def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-            residual_m, valid, max_order, all_in_view_weighting):
+def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
+                   valid, max_order, all_in_view_weighting):
+    """The receiver's inputs broadcast and checked (``prepare_inputs``), the budget and the
+    weighting checked, and the static order (``required_order`` when None): (args, order)."""
     if not isinstance(budget, IntegrityBudget):
         raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
                          "araim.BUDGET_SEED004_TABLE_I")
@@ -172,11 +174,18 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
                          f"got {all_in_view_weighting!r}")
     args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                           valid)
-    y = jnp.broadcast_to(jnp.asarray(residual_m, jnp.float64), args[0].shape[:-1])
     if max_order is None:
         max_order = required_order(args[7], args[1], args[5], args[6], budget.p_thresh)
     else:
         max_order = check_int("max_order", max_order, 1)
+    return args, max_order
+
+
+def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
+            residual_m, valid, max_order, all_in_view_weighting):
+    args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
+                                     p_const, budget, valid, max_order, all_in_view_weighting)
+    y = jnp.broadcast_to(jnp.asarray(residual_m, jnp.float64), args[0].shape[:-1])
     return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting)
 
 

@@ -64,8 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fde import _separation, _wsse
-from oaraim.araim.mhss import prepare_inputs, required_order
+from oaraim.araim.fde import _separation, _wsse, checked_inputs
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 
@@ -203,18 +202,8 @@ def monitor_maps(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_con
                  valid=None, *, max_order=None, all_in_view_weighting="int") -> MonitorMaps:
     """The MHSS receiver of ``detect_and_exclude`` as linear maps of the residual (module
     docstring). Arguments as ``araim.protection_levels`` (variances, m^2); batch first."""
-    if not isinstance(budget, IntegrityBudget):
-        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
-                         "araim.BUDGET_SEED004_TABLE_I")
-    if all_in_view_weighting not in ("int", "acc"):
-        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
-                         f"got {all_in_view_weighting!r}")
-    args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                          valid)
-    if max_order is None:
-        max_order = required_order(args[7], args[1], args[5], args[6], budget.p_thresh)
-    else:
-        max_order = check_int("max_order", max_order, 1)
+    args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
+                                     p_const, budget, valid, max_order, all_in_view_weighting)
     return _maps(*args, budget=budget, max_order=max_order, weighting=all_in_view_weighting)
 
 
@@ -495,7 +484,8 @@ class RiskTable(NamedTuple):
 def _one(maps, kind, source, const, direction, x, scale, key, n_samples, ce_samples, ce_rounds,
          crude, worst_bias, exclusion):
     inj = injection(maps, kind, source, const, direction, worst_bias)
-    a = jnp.where(inj.active, x * jnp.where(scale == 0, inj.a_det_m, inj.a_pl_m), 0.0)
+    unit = jnp.select([scale == 0, scale == 1], [inj.a_det_m, inj.a_pl_m], 1.0)  # 2: metres
+    a = jnp.where(inj.active, x * unit, 0.0)
     est = importance_estimate(maps, inj, a, direction, key, n_samples=n_samples,
                               ce_samples=ce_samples, ce_rounds=ce_rounds, crude=crude,
                               exclusion=exclusion)
@@ -580,6 +570,58 @@ def risk_table(maps: MonitorMaps, key, x_grid=DEFAULT_X_GRID, *, n_samples=2000,
                       bool(crude), nominal_bias == "worst", bool(exclusion))
     kind, source, const = scenario_slots(maps.valid.shape[-1], C)
     return RiskTable(kind, source, const, *out)
+
+
+class RampRisk(NamedTuple):
+    """A ramp fault on one source, seen by the snapshot receiver epoch by epoch."""
+
+    time_s: np.ndarray  # (n,) epochs since the ramp started
+    magnitude_m: np.ndarray  # (n,) rate x time
+    p_md: np.ndarray  # (n,) P(missed-detection HMI) at each epoch
+    se_md: np.ndarray  # (n,)
+    p_we: np.ndarray  # (n,) P(wrong-exclusion HMI)
+    p_detect: np.ndarray  # (n,) P(detection) at each epoch
+    mean_p_md: float  # per-epoch risk averaged over the ramp
+    union_p_md: float  # P(HMI at some epoch of the ramp) <= sum of the epochs' risks
+
+
+@partial(jax.jit, static_argnames=_SIZES)
+def _ramp(maps, source, direction, magnitudes, key, n_samples, ce_samples, ce_rounds, crude,
+          worst_bias, exclusion):
+    def one(args):
+        i, a = args
+        return _one(maps, jnp.asarray(SINGLE), source, jnp.asarray(-1), direction, a,
+                    jnp.asarray(2), jax.random.fold_in(key, i),
+                    n_samples, ce_samples, ce_rounds, crude, worst_bias, exclusion)[2]
+
+    return jax.lax.map(one, (jnp.arange(magnitudes.shape[0]), magnitudes))
+
+
+def ramp_risk(maps: MonitorMaps, source, direction, rate_mps, duration_s, epoch_s, key, *,
+              n_samples=2000, ce_samples=1000, ce_rounds=2, nominal_bias="worst",
+              exclusion=True) -> RampRisk:
+    """A ramp on ``source`` (a tower clock drifting away, a slowly growing multipath or
+    ephemeris error): at epoch t = epoch_s, 2 epoch_s, ..., duration_s the fault is rate x t
+    along the source's slope sign (``injection``), and each epoch is a snapshot with fresh
+    nominal noise. Returns every epoch's P(HMI) and two summaries: the mean per-epoch risk over
+    the ramp and the union bound on an HMI at some epoch (no independence assumed)."""
+    sizes = _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias)
+    if direction not in (HORIZONTAL, VERTICAL):
+        raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1), got {direction!r}")
+    for name, v in (("rate_mps", rate_mps), ("duration_s", duration_s), ("epoch_s", epoch_s)):
+        if not np.isfinite(v) or v < 0 or (name != "rate_mps" and v == 0):
+            raise ValueError(f"{name} must be finite and > 0 (rate >= 0), got {v!r}")
+    n = int(np.floor(duration_s / epoch_s + 1e-9))
+    if n < 1:
+        raise ValueError(f"duration_s ({duration_s}) must cover at least one epoch_s "
+                         f"({epoch_s})")
+    t = epoch_s * np.arange(1, n + 1)
+    mags = rate_mps * t
+    e = _ramp(maps, jnp.asarray(source), jnp.asarray(direction), jnp.asarray(mags), key,
+              *sizes, False, nominal_bias == "worst", bool(exclusion))
+    p = np.asarray(e.p_md)
+    return RampRisk(t, mags, p, np.asarray(e.se_md), np.asarray(e.p_we),
+                    np.asarray(e.p_detect), float(p.mean()), float(min(1.0, p.sum())))
 
 
 # ------------------------------------------------------------------------------- measured risk

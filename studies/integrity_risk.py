@@ -235,6 +235,37 @@ def cross_check(params, key, crude_samples):
     return out
 
 
+def sop_ramps(params, key, n_sops):
+    """Ramps on every tower of the first geometry of a cell with SOPs: (n_sops, 2, epochs)
+    per-epoch P(missed-detection HMI), the union bound per tower and direction, the epochs."""
+    table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
+    jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
+    kg = jax.random.fold_in(key, 0)  # geometry 0 of the cell (RiskCell.table)
+    _, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
+    order = c.order_for(table["az_rad"].shape[1], n_sops, params["p_s_sop"],
+                        params["p_const_sop"])
+    m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
+                        x["p_sat"], p_const, c.BUDGET, valid=x["valid"], max_order=order)
+    first = table["az_rad"].shape[1]
+    p, union, t, prior = [], [], None, []
+    for j in range(n_sops):
+        pj, uj = [], []
+        for d in (ir.HORIZONTAL, ir.VERTICAL):
+            r = ir.ramp_risk(m, first + j, d, params["ramp_rate_mps"],
+                             params["ramp_duration_s"], params["ramp_epoch_s"],
+                             jax.random.fold_in(kg, 100 + 2 * j + d),
+                             n_samples=params["samples"], ce_samples=params["ce_samples"],
+                             ce_rounds=params["ce_rounds"], nominal_bias=params["nominal_bias"])
+            pj.append(r.p_md)
+            uj.append(r.union_p_md)
+            t = r.time_s
+        p.append(pj)
+        union.append(uj)
+        inj = ir.injection(m, ir.SINGLE, first + j, -1, ir.HORIZONTAL)
+        prior.append(float(inj.prior))
+    return np.array(p), np.array(union), t, np.array(prior), m
+
+
 class IntegrityRisk(SweepStudy):
     name = "integrity-risk"
     title = ("Measured integrity risk of the MHSS PLs by fault injection and importance "
@@ -263,6 +294,12 @@ class IntegrityRisk(SweepStudy):
         "crude_samples": Param(200_000, count(0),
                                "crude Monte Carlo samples of the weak-budget cross-check "
                                "(0 skips it)"),
+        "ramp_rate_mps": Param(0.5, in_range(0.0, 1000.0),
+                               "SOP tower ramp: growth rate (a tower clock drifting away)",
+                               "m/s"),
+        "ramp_duration_s": Param(120.0, in_range(1e-3, 1e5), "SOP tower ramp: duration", "s"),
+        "ramp_epoch_s": Param(2.0, in_range(1e-3, 1e5), "SOP tower ramp: snapshot interval",
+                              "s"),
         "sigma_ura_sop_m": Param(SIGMA_URA_SOP_M, positive,
                                  "sigma_URA^S (seed 004 VII: 3 m, semi-urban)", "m"),
         "p_s_sop": Param(P_S_SOP, probability, "P_s^S (seed 004 VII: 1e-4)"),
@@ -364,6 +401,29 @@ class IntegrityRisk(SweepStudy):
                              f"({row['hits_crude']} hits); wall-time speed-up at equal "
                              f"relative error {row.pop('speedup') or 0:.3g}"})
         metrics["weak_budget_cross_check"] = cross
+        n_max = max(n_sops)
+        n_ep = int(np.floor(params["ramp_duration_s"] / params["ramp_epoch_s"] + 1e-9))
+        ramp = np.zeros((len(n_sops), max(n_max, 1), 2, max(n_ep, 1)))
+        ramp_t = params["ramp_epoch_s"] * np.arange(1, ramp.shape[-1] + 1)
+        for ci, n in enumerate(n_sops):
+            if n == 0 or not ok[ci, 0]:
+                continue
+            p, union, ramp_t, prior, m = sop_ramps(params, cell_key(seed, 0), n)
+            ramp[ci, :n] = p
+            alloc0 = np.array(ir.allocated_budget(c.BUDGET, float(m.p_not_monitored)))
+            worst = union.max(axis=0)  # (2,) over towers
+            metrics[f"sop_ramp_n{n}"] = {
+                "union_p_hmi_h": union[:, 0].tolist(), "union_p_hmi_v": union[:, 1].tolist(),
+                "prior": prior.tolist(),
+                "prior_x_union_over_allocated": (prior.max() * worst / alloc0).tolist()}
+            rows.append({"quantity": f"SOP tower ramp ({params['ramp_rate_mps']:g} m/s over "
+                         f"{params['ramp_duration_s']:g} s), {n} SOPs, geometry 0: worst "
+                         "tower's P(HMI at some epoch), horizontal", "unit": "",
+                         "published": None, "reproduced": float(worst[0]),
+                         "note": f"vertical {worst[1]:.3g}; union bound over "
+                         f"{ramp_t.size} snapshots; x the tower's prior {prior.max():.2g} = "
+                         f"{prior.max() * worst[0] / alloc0[0]:.3g} of the horizontal "
+                         "allocation"})
         table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         metrics["sky_source"] = table["description"]
         metrics["geometries"] = G
@@ -374,6 +434,8 @@ class IntegrityRisk(SweepStudy):
         out["risk"] = (("n_sops", "geometry", "direction"), risk)
         out["risk_upper95"] = (("n_sops", "geometry", "direction"), upper)
         out["allocated"] = (("n_sops", "geometry", "direction"), alloc)
+        out["ramp_p_md"] = (("n_sops", "ramp_source", "direction", "ramp_time_s"), ramp)
+        out = out.assign_coords(ramp_time_s=ramp_t)
         out = out.assign_coords(direction=["horizontal", "vertical"])
         out = out.assign_attrs(sky_source=table["description"], gps_slots=n_slots(params),
                                phmi_h=c.BUDGET.phmi_h,
@@ -464,4 +526,24 @@ class IntegrityRisk(SweepStudy):
         fig.savefig(path, dpi=110)
         plt.close(fig)
         paths.append(path)
+
+        if "ramp_p_md" in ds and float(ds["ramp_p_md"].max()) > 0:
+            ci = int(np.argmax(cells))
+            fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), layout="constrained")
+            t = ds["ramp_time_s"].values
+            for j, ax in enumerate(axes):
+                for k in range(int(cells[ci])):
+                    p = ds["ramp_p_md"].values[ci, k, j]
+                    ax.plot(t, np.where(p > 0, p, np.nan), label=f"tower {k}")
+                ax.set_yscale("log")
+                ax.set_xlabel("time since the ramp started (s)")
+                ax.set_ylabel(f"P(HMI {'horizontal' if j == 0 else 'vertical'}) per epoch")
+                ax.grid(alpha=0.3)
+            axes[0].legend(fontsize=8)
+            fig.suptitle(f"SOP tower ramps, {int(cells[ci])} SOPs, geometry 0 (snapshot MHSS "
+                         "with exclusion, importance sampling)", fontsize=10)
+            path = f"{out_dir}/sop_ramp_risk.png"
+            fig.savefig(path, dpi=110)
+            plt.close(fig)
+            paths.append(path)
         return paths

@@ -138,11 +138,33 @@ def test_importance_sampling_agrees_with_crude_monte_carlo(cases):
     assert gains[0] > 10 and gains[1] > 10  # fault-free: rare events, IS far ahead
 
 
+def test_ramp_risk(cases):
+    """A ramp at rate 0 is the fault-free case at every epoch (closed form, weak budget; the
+    union bound is the sum); a 1 m/s ramp on the satellite with the largest vertical slope is
+    detected with certainty once it is large, its risk first grows then vanishes."""
+    _, _, _, maps_w = cases
+    m = _pick(maps_w, 1)
+    l = int(np.argmax(np.abs(np.asarray(m.s0[2])) * np.asarray(m.valid)))
+    r = ir.ramp_risk(m, l, ir.VERTICAL, 0.0, 4.0, 1.0, jax.random.key(5), n_samples=4000)
+    expect, p_fa = _closed_form_ff_v(m, WEAK)
+    np.testing.assert_array_equal(r.time_s, [1.0, 2.0, 3.0, 4.0])
+    assert np.all(np.abs(r.p_md - expect) <= 4 * r.se_md + expect * p_fa)
+    assert r.union_p_md == pytest.approx(r.p_md.sum()) and r.mean_p_md == pytest.approx(
+        r.p_md.mean())
+    a_det = float(ir.injection(m, ir.SINGLE, l, -1, ir.VERTICAL).a_det_m)
+    r = ir.ramp_risk(m, l, ir.VERTICAL, 1.0, 3.0 * a_det, a_det / 10, jax.random.key(6),
+                     n_samples=1000, ce_samples=200)
+    assert r.p_detect[-1] > 0.999 and r.p_md[-1] < 1e-6
+    assert r.p_md.max() > 10 * r.p_md[0]
+    with pytest.raises(ValueError, match="epoch_s"):
+        ir.ramp_risk(m, l, ir.VERTICAL, 1.0, 3.0, 0.0, jax.random.key(0))
+
+
 def test_injection_hand_values(cases):
     """Single source: the fault is +-e_l with the sign of its slope, at A_det the mean
-    separation of its own mode equals the threshold and at A_PL the mean error the VPL; constellation: the fault direction has no
-    component along a common bias (the clock absorbs it), and the PL bias is b_nom with the
-    slope's sign."""
+    separation of its own mode equals the threshold and at A_PL the mean error the VPL;
+    constellation: the fault direction has no component along a common bias (the clock
+    absorbs it), and the PL bias is b_nom with the slope's sign."""
     _, _, maps, _ = cases
     m = _pick(maps, 1)
     s0 = np.asarray(m.s0)

@@ -118,10 +118,11 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          "availability-map": {"lat_deg": "-35,50", "lon_deg": "0,140", "duration_s": "14400",
                               "step_s": "3600"},
          # a realization is an importance-sampled P(HMI): one geometry, two magnitudes, few
-         # samples; the crude cross-check small
+         # samples; no crude cross-check (tests/test_integrity_risk.py compares IS and crude)
          "integrity-risk": {"n_sops": "2", "geometries": "1", "x_grid": "0,1",
                             "samples": "200", "ce_samples": "100", "ce_rounds": "1",
-                            "crude_samples": "2000"}}
+                            "crude_samples": "0", "ramp_duration_s": "4",
+                            "ramp_epoch_s": "2"}}
 
 
 def _n(study, n, params=None):
