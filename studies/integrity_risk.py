@@ -535,6 +535,10 @@ class IntegrityRisk(SweepStudy):
                 for k in range(int(cells[ci])):
                     p = ds["ramp_p_md"].values[ci, k, j]
                     ax.plot(t, np.where(p > 0, p, np.nan), label=f"tower {k}")
+                if not np.any(ds["ramp_p_md"].values[ci, :, j] > 0):
+                    ax.text(0.5, 0.5, "P(HMI) below 1e-300 at every epoch\n(the PL of geometry 0 "
+                            "is far above any error)", ha="center", transform=ax.transAxes,
+                            fontsize=8)
                 ax.set_yscale("log")
                 ax.set_xlabel("time since the ramp started (s)")
                 ax.set_ylabel(f"P(HMI {'horizontal' if j == 0 else 'vertical'}) per epoch")
