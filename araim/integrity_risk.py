@@ -64,6 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim.budget import IntegrityBudget
+from oaraim.araim.fault_modes import fault_modes_batch_last, to_batch_first, to_batch_last
 from oaraim.araim.fde import _separation, _wsse, checked_inputs
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
@@ -126,6 +127,17 @@ class Outcome(NamedTuple):
     max_tau: jax.Array
 
 
+def _exclusion_sets(valid, constellation, p_sat, p_const, p_thresh, max_order):
+    """(..., K, L): the sources each mode of the template excludes (mode 0: none), as the
+    receiver's kernel builds them (``fault_modes``)."""
+    batch = valid.shape[:-1]
+    fm = fault_modes_batch_last(to_batch_last(valid, 1), to_batch_last(constellation, 1),
+                                to_batch_last(p_sat, 1), to_batch_last(p_const, 1), p_thresh,
+                                max_order)
+    ex = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)  # (K, L, B)
+    return to_batch_first(ex, batch)
+
+
 def _add_unit_axis(args, n_units, axis_of_sources):
     """Insert a residual axis of n_units before the source axis of each input."""
     out = []
@@ -148,18 +160,21 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
     C = p_const.shape[-1]
     eye = jnp.eye(L)
     args = (g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    top = _separation(*_add_unit_axis(args, L, _TAILS), jnp.broadcast_to(
-        eye, valid.shape[:-1] + (L, L)), budget, max_order, weighting)
-    s0 = jnp.swapaxes(top.position_m, -1, -2)  # (..., 3, L)
-    sep = jnp.moveaxis(top.separation_m, -3, -1)  # (..., K, 3, L)
-    excluded = top.excluded[..., 0, :, :]
-    monitored = top.monitored[..., 0, :]
-    # candidate subsets: each mode's kept sources as a new all-in-view set
-    keep = valid[..., None, :] & ~excluded  # (..., K, L)
+    # candidate subsets: each mode's kept sources as a new all-in-view set; candidate 0 keeps
+    # every source, so it is the receiver's own all-in-view solution (one kernel call, traced
+    # and compiled once, serves both)
+    excluded = _exclusion_sets(valid, constellation, p_sat, p_const, budget.p_thresh,
+                               max_order)  # (..., K, L)
+    keep = valid[..., None, :] & ~excluded
     K = keep.shape[-2]
     cargs = _add_unit_axis(args, K, _TAILS)[:-1] + [keep]
     sub = _separation(*_add_unit_axis(cargs, L, _TAILS), jnp.broadcast_to(
         eye, keep.shape[:-1] + (L, L)), budget, max_order, weighting)
+    top = jax.tree.map(lambda x: x[(Ellipsis, 0) + (slice(None),) * (x.ndim - valid.ndim)],
+                       sub)  # candidate 0: (..., L units, ...)
+    s0 = jnp.swapaxes(top.position_m, -1, -2)  # (..., 3, L)
+    sep = jnp.moveaxis(top.separation_m, -3, -1)  # (..., K, 3, L)
+    monitored = top.monitored[..., 0, :]
     cand_s = jnp.swapaxes(sub.position_m, -1, -2)  # (..., K, 3, L)
     cand_sep = jnp.moveaxis(sub.separation_m, -3, -1)  # (..., K, K, 3, L)
     cand_ok = sub.pl.status[..., 0] == Status.OK

@@ -30,8 +30,12 @@ N_GEOM = 6
 
 
 def _maps(c, budget):
-    return ir.monitor_maps(c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"],
-                           c["p_sat"], c["p_const"], budget, valid=c["valid"], max_order=1)
+    """One geometry per call, stacked: the (L, 3) shapes the study's kernel compiles (L = 18 is
+    12 GPS slots + 6 SOPs there, see tests/test_studies.py SMALL), so the suite compiles once."""
+    one = [ir.monitor_maps(c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i],
+                           c["b_nom"][i], c["p_sat"][i], c["p_const"][i], budget,
+                           valid=c["valid"][i], max_order=1) for i in range(len(c["g"]))]
+    return jax.tree.map(lambda *a: np.stack(a), *one)
 
 
 def _pick(maps, i):
@@ -195,6 +199,7 @@ def test_pl_bounds_measured_risk_table_i(cases):
     _, _, maps, _ = cases
     for i in range(2):
         m = _pick(maps, i)
+        # the sizes of the study's generic tests (tests/test_studies.py SMALL): one compilation
         t = ir.risk_table(m, jax.random.key(i), (0.0, 0.9, 1.1, 1.5), n_samples=1000,
                           ce_samples=500)
         risk, upper, _, _ = ir.measured_risk(t)

@@ -117,12 +117,14 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          # its realizations are the grid (longitudes x epochs): 2 rows x 2 users x 4 epochs
          "availability-map": {"lat_deg": "-35,50", "lon_deg": "0,140", "duration_s": "14400",
                               "step_s": "3600"},
-         # a realization is an importance-sampled P(HMI): one geometry, two magnitudes, few
-         # samples; no crude cross-check (tests/test_integrity_risk.py compares IS and crude)
-         "integrity-risk": {"n_sops": "2", "geometries": "1", "x_grid": "0,1",
-                            "samples": "200", "ce_samples": "100", "ce_rounds": "1",
-                            "crude_samples": "0", "ramp_duration_s": "4",
-                            "ramp_epoch_s": "2"}}
+         # a realization is an importance-sampled P(HMI): one geometry, four magnitudes; no
+         # crude cross-check (tests/test_integrity_risk.py compares IS and crude). 6 SOPs +
+         # 12 GPS slots, order 1 (P_s^S 1e-5) and these sizes are what
+         # tests/test_integrity_risk.py compiles: no compilation of its own
+         "integrity-risk": {"n_sops": "6", "p_s_sop": "1e-5", "geometries": "1",
+                            "x_grid": "0,0.9,1.1,1.5", "samples": "1000", "ce_samples": "500",
+                            "crude_samples": "0",
+                            "ramp_duration_s": "4", "ramp_epoch_s": "2"}}
 
 
 def _n(study, n, params=None):
