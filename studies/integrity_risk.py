@@ -266,6 +266,14 @@ def sop_ramps(params, key, n_sops):
     return np.array(p), np.array(union), t, np.array(prior), m
 
 
+def _save(fig, path):
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 class IntegrityRisk(SweepStudy):
     name = "integrity-risk"
     title = ("Measured integrity risk of the MHSS PLs by fault injection and importance "
@@ -498,10 +506,7 @@ class IntegrityRisk(SweepStudy):
         axes[0, -1].legend(handles=handles, fontsize=7, loc="lower right")
         fig.suptitle(f"Risk vs fault magnitude per mode, geometry {g0} (missed detection, "
                      "importance sampling)", fontsize=10)
-        path = f"{out_dir}/risk_vs_magnitude.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
+        paths.append(_save(fig, f"{out_dir}/risk_vs_magnitude.png"))
 
         fig, ax = plt.subplots(figsize=(6.4, 4.2), layout="constrained")
         for ci, n in enumerate(cells):
@@ -522,10 +527,7 @@ class IntegrityRisk(SweepStudy):
         ax.set_title("Does the PL bound the risk? (<= 1: yes)", fontsize=10)
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
-        path = f"{out_dir}/risk_ratio_cdf.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
+        paths.append(_save(fig, f"{out_dir}/risk_ratio_cdf.png"))
 
         if "ramp_p_md" in ds and float(ds["ramp_p_md"].max()) > 0:
             ci = int(np.argmax(cells))
@@ -546,8 +548,5 @@ class IntegrityRisk(SweepStudy):
             axes[0].legend(fontsize=8)
             fig.suptitle(f"SOP tower ramps, {int(cells[ci])} SOPs, geometry 0 (snapshot MHSS "
                          "with exclusion, importance sampling)", fontsize=10)
-            path = f"{out_dir}/sop_ramp_risk.png"
-            fig.savefig(path, dpi=110)
-            plt.close(fig)
-            paths.append(path)
+            paths.append(_save(fig, f"{out_dir}/sop_ramp_risk.png"))
         return paths
