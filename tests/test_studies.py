@@ -124,7 +124,7 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          "integrity-risk": {"n_sops": "6", "p_s_sop": "1e-5", "geometries": "1",
                             "x_grid": "0,0.9,1.1,1.5", "samples": "1000", "ce_samples": "500",
                             "crude_samples": "0",
-                            "ramp_duration_s": "4", "ramp_epoch_s": "2"}}
+                            "ramp_duration_s": "30", "ramp_epoch_s": "1"}}
 
 
 def _n(study, n, params=None):
