@@ -232,7 +232,6 @@ def evaluate(maps: MonitorMaps, residual_m, exclusion=True) -> Outcome:
     the exclusion branch (``we_*`` False, ``excluded_mode`` -1)."""
     y = jnp.where(maps.valid, jnp.asarray(residual_m, jnp.float64), 0.0)
     n = y.shape[:-1]
-    K = maps.sep.shape[-3]
     e = y @ maps.s0.T  # (N, 3)
     d = jnp.einsum("...l,kql->...kq", y, maps.sep)
     tau = _tau(d, maps.threshold_m)
@@ -259,7 +258,6 @@ def evaluate(maps: MonitorMaps, residual_m, exclusion=True) -> Outcome:
     kept = detected & found
     we_h = kept & (jnp.hypot(eb[..., 0], eb[..., 1]) > maps.cand_hpl_m[best])
     we_v = kept & (jnp.abs(eb[..., 2]) > maps.cand_vpl_m[best])
-    del K
     return Outcome(detected, md_h, md_v, we_h, we_v, jnp.where(kept, best, -1), hpe, vpe,
                    max_tau)
 
