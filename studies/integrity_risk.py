@@ -197,16 +197,22 @@ def per_geometry_risk(ds, G, S, X):
     return risk, upper
 
 
-def cross_check(params, key, crude_samples):
-    """Weak budget, first geometry of the largest cell: IS against crude Monte Carlo on the
-    fault-free and the worst single-satellite scenarios, with wall times (compiled first)."""
-    n_sops = max(params["n_sops"])
+def geometry_zero_maps(params, key, n_sops, budget, max_order):
+    """Geometry 0 of a cell (as ``RiskCell.table`` draws it): (its key, inputs, MonitorMaps,
+    the GPS epoch) under ``budget``."""
     table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
     jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
     kg = jax.random.fold_in(key, 0)
-    _, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
+    epoch, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
     m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                        x["p_sat"], p_const, WEAK_BUDGET, valid=x["valid"], max_order=1)
+                        x["p_sat"], p_const, budget, valid=x["valid"], max_order=max_order)
+    return kg, x, m, epoch
+
+
+def cross_check(params, key, crude_samples):
+    """Weak budget, first geometry of the largest cell: IS against crude Monte Carlo on the
+    fault-free and the worst single-satellite scenarios, with wall times (compiled first)."""
+    _, x, m, _ = geometry_zero_maps(params, key, max(params["n_sops"]), WEAK_BUDGET, 1)
     worst = int(np.argmax(np.abs(np.asarray(m.s0[2])) * np.asarray(x["valid"])))
     opts = dict(n_samples=params["samples"], ce_samples=params["ce_samples"],
                 ce_rounds=params["ce_rounds"], nominal_bias=params["nominal_bias"])
@@ -238,15 +244,9 @@ def cross_check(params, key, crude_samples):
 def sop_ramps(params, key, n_sops):
     """Ramps on every tower of the first geometry of a cell with SOPs: (n_sops, 2, epochs)
     per-epoch P(missed-detection HMI), the union bound per tower and direction, the epochs."""
-    table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
-    jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
-    kg = jax.random.fold_in(key, 0)  # geometry 0 of the cell (RiskCell.table)
-    _, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
-    order = c.order_for(table["az_rad"].shape[1], n_sops, params["p_s_sop"],
-                        params["p_const_sop"])
-    m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                        x["p_sat"], p_const, c.BUDGET, valid=x["valid"], max_order=order)
-    first = table["az_rad"].shape[1]
+    first = n_slots(params)
+    order = c.order_for(first, n_sops, params["p_s_sop"], params["p_const_sop"])
+    kg, _, m, _ = geometry_zero_maps(params, key, n_sops, c.BUDGET, order)
     p, union, t, prior = [], [], None, []
     for j in range(n_sops):
         pj, uj = [], []
@@ -368,17 +368,15 @@ class IntegrityRisk(SweepStudy):
         # importance-sampling efficiency at the Table I levels: crude samples for the same
         # relative error over samples drawn, over every estimate with hits
         drawn = params["samples"] + params["ce_rounds"] * params["ce_samples"]
-        gains = []
+        gains, probs = [], []
         for d in DIRS:
             p, se = get(f"p_md_{d}"), get(f"se_md_{d}")
             act = get(f"active_{d}") & (get(f"hits_md_{d}") >= 10) & (p > 0) & (p < 0.5) & \
                 (se > 0)
             p, se = p[act], se[act]
             gains.append(p * (1 - p) / (params["samples"] * se**2) * params["samples"] / drawn)
-        gains = np.concatenate(gains)
-        probs = np.concatenate([p[(get(f"active_{d}") & (get(f"hits_md_{d}") >= 10) & (p > 0)
-                                   & (p < 0.5) & (get(f"se_md_{d}") > 0))]
-                                for d in DIRS for p in [get(f"p_md_{d}")]])
+            probs.append(p)
+        gains, probs = np.concatenate(gains), np.concatenate(probs)
         if gains.size:
             near = gains[probs >= 1e-10]
             metrics["is_sample_speedup_equal_rel_error"] = {
