@@ -47,7 +47,9 @@ max order R); which modes are live, their exclusion sets and priors are computed
 so a batch with different constellation labels shares one compiled kernel.
 """
 
+import functools
 import itertools
+from dataclasses import dataclass
 from functools import cache
 from typing import NamedTuple
 
@@ -176,8 +178,11 @@ class FaultModes(NamedTuple):
     prior: jax.Array  # (T, B) prior probability assigned to the mode (0 where not live)
     live: jax.Array  # (T, B) bool: monitored at this geometry's order
     order: jax.Array  # (B,) int: the order r
-    p_beyond_order: jax.Array  # (B,) P(more than r constellations faulty)
+    p_beyond_order: jax.Array  # (B,) P_NM before singular modes (grouped: P(more than r
+    #                            constellations faulty); event rules: every set not monitored)
     p_no_fault: jax.Array  # (B,)
+    #: (B,) the convention would monitor a mode beyond the template order (kept in P_NM)
+    needs_higher_order: jax.Array
 
 
 def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_order: int):
@@ -229,7 +234,7 @@ def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_o
     is_src = jnp.asarray(np.arange(L)[None, :] == src[:, None])[:, :, None]
     excluded = valid[None] & (member_excl | is_src)
     return FaultModes(excluded, excl_c, prior, live, order, p_beyond,
-                      jnp.prod(gp.p_none, axis=0))
+                      jnp.prod(gp.p_none, axis=0), p_beyond > p_thresh)
 
 
 def to_batch_last(x, event_dims: int):
@@ -245,14 +250,423 @@ def to_batch_first(x, batch_shape):
     return x.reshape(tuple(batch_shape) + x.shape[1:])
 
 
-def fault_modes(valid, constellation, p_sat, p_const, p_thresh, max_order: int) -> FaultModes:
-    """Batch-first ``fault_modes_batch_last``: valid, constellation, p_sat (..., L), p_const
-    (..., C); returns arrays (..., T, L), (..., T, C), (..., T) and (...)."""
+def fault_modes(valid, constellation, p_sat, p_const, p_thresh, max_order: int,
+                rule=None) -> FaultModes:
+    """Batch-first fault modes: valid, constellation, p_sat (..., L), p_const (..., C); returns
+    arrays (..., T, L), (..., T, C), (..., T) and (...). ``p_thresh``: a float (the ``grouped``
+    rule, ``fault_modes_batch_last``) or an ``IntegrityBudget``; ``rule``: a ``FaultModeRule``
+    or its name (default ``grouped`` for a float p_thresh, else ``add-v4.2``)."""
     valid = jnp.asarray(valid, bool)
     batch = valid.shape[:-1]
     args = [to_batch_last(jnp.broadcast_to(jnp.asarray(x), valid.shape), 1)
             for x in (valid, constellation, p_sat)]
     pc = to_batch_last(jnp.broadcast_to(jnp.asarray(p_const, jnp.float64),
                                         batch + jnp.shape(p_const)[-1:]), 1)
-    fm = fault_modes_batch_last(*args, pc, p_thresh, max_order)
+    if isinstance(p_thresh, float | int):
+        if rule is not None and fault_mode_rule(rule).events:
+            raise ValueError("an event rule needs the IntegrityBudget (PHMI, P_THRES)")
+        fm = fault_modes_batch_last(*args, pc, p_thresh, max_order)
+    else:
+        rule = fault_mode_rule(rule)
+        fm = select_fault_modes(*args, pc, p_thresh, rule, check_order(rule, max_order))
     return FaultModes(*(to_batch_first(x, batch) for x in fm))
+
+
+# --------------------------------------------------------------------------------------------
+# Fault-mode conventions (issue 28): the ADD's enumeration of independent events, and ours.
+# --------------------------------------------------------------------------------------------
+
+#: the conventions ``FaultModeRule`` accepts, by name (docs/conformance.md)
+CONVENTIONS = ("add-v4.2", "add-v3", "add-v3-consolidated", "blanch-2012", "grouped")
+#: the highest order of the event conventions (pairs of events); ``grouped`` goes to 3
+MAX_EVENT_ORDER = 2
+#: source codes 2^l are exact in float64 up to this many sources (duplicate detection)
+MAX_EVENT_SOURCES = 52
+
+
+@dataclass(frozen=True)
+class FaultModeRule:
+    """Which fault modes are monitored and with which priors (a static configuration object).
+
+    Events are each valid source (P_sat) and each present constellation (P_const), independent;
+    the prior of a set E of events is exact, P0 prod_{e in E} P_e / (1 - P_e) with P0 the
+    probability of no event. A mode excludes the union of the sources its events touch; modes
+    with equal exclusion sets are one mode (priors summed, as MAAST's ``find_unique_subsets``).
+
+    - ``add-v4.2`` (the current ADD, MAAST 2024 ``determine_subsets_v5``): enumerate the sets of
+      up to max(order, 2) events, fold into each constellation mode every set inside that
+      constellation whose prior is below ``fc_thres`` x the constellation's prior, monitor every
+      set whose prior exceeds PHMI_V + PHMI_H, then the others by increasing number of sources
+      out (ties in enumeration order) until P_NM <= P_THRES.
+    - ``add-v3`` (ADD v3.0 / v3.1): sets of order 1, 2, ... in decreasing prior (ties in
+      enumeration order) until P_NM <= P_THRES, no folding.
+    - ``add-v3-consolidated``: ``add-v3`` after the folding of ``add-v4.2``.
+    - ``blanch-2012`` (Blanch et al., ION GNSS 2012, Appendix J): satellites and constellations
+      apart: every set of up to N_sat satellites and of up to N_const constellations, N_sat the
+      smallest with P(more than N_sat satellite faults) <= ``sat_share`` x P_THRES and N_const
+      with P(more than N_const constellation faults) <= (1 - ``sat_share``) x P_THRES; P_NM is
+      the sum of the two tails; priors exact within each of the two families.
+    - ``grouped``: the constellation-state grouping of this module's first part (seed 004's SOP
+      studies, P_s up to 0.1): two faults in one constellation are that constellation whole.
+
+    P_NM = 1 - P(no fault) - sum of the monitored priors: what the enumeration leaves out, the
+    sets beyond the order, and (in the kernels) the priors of modes whose subset is singular.
+    """
+
+    name: str = "add-v4.2"
+    fc_thres: float = 0.01
+    sat_share: float = 0.5
+
+    def __post_init__(self):
+        if self.name not in CONVENTIONS:
+            raise ValueError(f"fault_modes must be one of {', '.join(CONVENTIONS)}, "
+                             f"got {self.name!r}")
+        if not (0.0 <= float(self.fc_thres) < 1.0):
+            raise ValueError(f"fc_thres must lie in [0, 1), got {self.fc_thres!r}")
+        if not (0.0 < float(self.sat_share) < 1.0):
+            raise ValueError(f"sat_share must lie in (0, 1), got {self.sat_share!r}")
+
+    @property
+    def events(self) -> bool:
+        """The mode set is an enumeration of event sets (every convention but ``grouped``)."""
+        return self.name != "grouped"
+
+    @property
+    def consolidated(self) -> bool:
+        return self.name in ("add-v4.2", "add-v3-consolidated")
+
+    @property
+    def max_order(self) -> int:
+        return MAX_EVENT_ORDER if self.events else 3
+
+
+#: the default convention of the kernels: the current ADD
+DEFAULT_RULE = FaultModeRule()
+
+
+def fault_mode_rule(x) -> FaultModeRule:
+    """A ``FaultModeRule`` from itself or its name (None: the default, ``add-v4.2``)."""
+    if x is None:
+        return DEFAULT_RULE
+    if isinstance(x, FaultModeRule):
+        return x
+    if isinstance(x, str):
+        return FaultModeRule(x)
+    raise ValueError(f"fault_modes must be a name ({', '.join(CONVENTIONS)}) or an "
+                     f"araim.FaultModeRule, got {x!r}")
+
+
+class EventTemplate(NamedTuple):
+    """Static event sets of order <= R: ``sources`` (T, 2) source slots (-1: none) and
+    ``constellations`` (T, 2) constellation slots (-1: none), in MAAST's enumeration order
+    (``itertools.combinations`` over the events [sources 0..L-1, constellations 0..C-1])."""
+
+    sources: np.ndarray
+    constellations: np.ndarray
+    order: np.ndarray
+
+
+@cache
+def event_template(n_sources: int, n_constellations: int, order: int) -> EventTemplate:
+    L, C = n_sources, n_constellations
+    src, con, k_of = [], [], []
+    for k in range(1, order + 1):
+        for ev in itertools.combinations(range(L + C), k):
+            s = [e for e in ev if e < L]
+            c = [e - L for e in ev if e >= L]
+            src.append(s + [-1] * (MAX_EVENT_ORDER - len(s)))
+            con.append(c + [-1] * (MAX_EVENT_ORDER - len(c)))
+            k_of.append(k)
+    return EventTemplate(np.array(src, int).reshape(-1, MAX_EVENT_ORDER),
+                         np.array(con, int).reshape(-1, MAX_EVENT_ORDER), np.array(k_of, int))
+
+
+def template_source(rule: FaultModeRule, n_sources: int, n_constellations: int,
+                    max_order: int) -> np.ndarray:
+    """(T,) per candidate mode of the kernel: its first source slot, -1 for a mode that excludes
+    whole constellations only (the kernels' fast paths); the first L modes are the single
+    sources in both template families."""
+    if not rule.events:
+        return np.asarray(mode_template(n_sources, n_constellations, max_order).source)
+    return event_template(n_sources, n_constellations, max_order).sources[:, 0]
+
+
+def n_template_modes(rule: FaultModeRule, n_sources: int, n_constellations: int,
+                     max_order: int) -> int:
+    return template_source(rule, n_sources, n_constellations, max_order).size
+
+
+def _event_tails(p, order: int):
+    """(P(exactly k events) for k = 0..order, P(more than order events)) for independent events
+    p (E, B), as sums of non-negative terms."""
+    dist = [jnp.ones(p.shape[1:])] + [jnp.zeros(p.shape[1:])] * order
+    tail = jnp.zeros(p.shape[1:])
+    for e in range(p.shape[0]):
+        q = p[e]
+        tail = tail + dist[order] * q
+        dist = [dist[0] * (1 - q)] + [dist[k] * (1 - q) + dist[k - 1] * q
+                                      for k in range(1, order + 1)]
+    return dist, tail
+
+
+def _unrolled(op):
+    """A reduction over a short non-minor axis written out as elementwise ops: XLA fuses and
+    vectorises them over the trailing batch axis (as ``mhss._sum``; a reduce over a non-minor
+    axis ran several times slower here)."""
+    def reduce(x, axis):
+        if x.shape[axis] == 0:
+            return jnp.zeros(x.shape[:axis] + x.shape[axis + 1:], x.dtype)
+        out = jax.lax.index_in_dim(x, 0, axis, keepdims=False)
+        for m in range(1, x.shape[axis]):
+            out = op(out, jax.lax.index_in_dim(x, m, axis, keepdims=False))
+        return out
+    return reduce
+
+
+_usum = _unrolled(jnp.add)
+_uany = _unrolled(jnp.logical_or)
+_umax = _unrolled(jnp.maximum)
+_umin = _unrolled(jnp.minimum)
+_uprod = _unrolled(jnp.multiply)
+
+
+@cache
+def _event_indices(n_sources: int, n_constellations: int, order: int):
+    """Static description of ``event_template``'s sets for gathers: the two source slots and
+    the two constellation slots of each set (E, 2) with the sentinels L and C for "none", the
+    number of sources named (E,), the order (E,), whether the constellations named lie within
+    {c} (E, C), and the index of each constellation's own mode (C,)."""
+    tpl = event_template(n_sources, n_constellations, order)
+    L, C = n_sources, n_constellations
+    src = np.where(tpl.sources >= 0, tpl.sources, L)
+    con = np.where(tpl.constellations >= 0, tpl.constellations, C)
+    n_src = np.sum(tpl.sources >= 0, axis=1)
+    within = np.stack([np.all((tpl.constellations < 0) | (tpl.constellations == c), axis=1)
+                       for c in range(C)], axis=1)
+    own = np.array([int(np.flatnonzero((n_src == 0) & (tpl.constellations[:, 0] == c)
+                                       & (tpl.constellations[:, 1] < 0))[0])
+                    for c in range(C)], int)
+    return src, con, n_src, tpl.order, within, own
+
+
+def _blocks_rows(rows, like):
+    """Stack (B,) rows into an array like ``like`` (E, B) by in-place row updates (a stack or
+    concatenation fused with its parts runs one branchy loop per element: ``mhss._blocks``)."""
+    out = jnp.zeros_like(like)
+    for t, r in enumerate(rows):
+        out = jax.lax.dynamic_update_slice_in_dim(out, r[None], t, axis=0)
+    return linalg.materialize(out)
+
+
+def _pad(x, value):
+    """x (K, B) with one more row ``value`` (the sentinel slot of ``_event_indices``)."""
+    return jnp.concatenate([x, jnp.full((1,) + x.shape[1:], value, x.dtype)], axis=0)
+
+
+def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: FaultModeRule,
+                           max_order: int, full=False) -> FaultModes:
+    """The monitored modes of an event convention (``FaultModeRule``), batch-last.
+
+    The kernel computes the geometry of the T event sets of order <= ``max_order`` (the slots);
+    priors, folding and selection run over the E sets of order <= R_enum (max(max_order, 2)
+    for the consolidated conventions, ``max_order`` otherwise), so a set beyond the slots stays
+    in P_NM. The selection is decided for the slots: P_NM before slot i (what the sorted walk
+    has left when it reaches i) is P(more than R_enum events) plus the candidates not before i,
+    written as comparisons of keys, no sort; the sets beyond the slots all come after every slot
+    of the same or a smaller key, so they enter as a few sums. ``full``: also decide whether
+    the walk would monitor a set beyond the slots (``needs_higher_order``, for the host's
+    ``required_order``), else that field is False.
+    """
+    L, C = valid.shape[0], p_const.shape[0]
+    if L > MAX_EVENT_SOURCES:
+        raise ValueError(f"fault_modes={rule.name!r} handles at most {MAX_EVENT_SOURCES} "
+                         f"sources per geometry, got {L}")
+    r_enum = max(max_order, MAX_EVENT_ORDER) if rule.consolidated else max_order
+    src, con, n_src, order_t, within, own = _event_indices(L, C, r_enum)
+    T = event_template(L, C, max_order).order.size  # slots: the first T sets
+    E = order_t.size
+    dtype = p_sat.dtype
+    s0, s1, c0, c1 = src[:, 0], src[:, 1], con[:, 0], con[:, 1]
+
+    lab = jnp.where(valid, constellation, -1)
+    member = lab[:, None, :] == jnp.arange(C)[None, :, None]  # (L, C, B), valid sources only
+    n_c = _usum(member.astype(jnp.int32), 0)  # (C, B)
+    present = n_c > 0
+    ps = jnp.where(valid, p_sat, 0.0)
+    pc = jnp.where(present, p_const, 0.0)
+    vpad, prespad = _pad(valid, True), _pad(present, True)
+    # (stored: left to itself XLA recomputes these producers inside every consumer)
+    exists = linalg.materialize(vpad[s0] & vpad[s1] & prespad[c0] & prespad[c1])  # (E, B)
+
+    def priors(p_s, p_c):
+        """Exact priors P0 prod p / (1 - p) of every set (E, B), as products (no logarithm:
+        an exponential per set was a fifth of the kernel)."""
+        p0 = _uprod(1.0 - p_s, 0) * _uprod(1.0 - p_c, 0)
+        r_s, r_c = _pad(p_s / (1.0 - p_s), 1.0), _pad(p_c / (1.0 - p_c), 1.0)
+        v = p0[None] * r_s[s0] * r_s[s1] * r_c[c0] * r_c[c1]
+        return linalg.materialize(jnp.where(exists, v, 0.0))
+
+    full_flag = jnp.zeros(valid.shape[1:], bool)
+    if rule.name == "blanch-2012":
+        # two families; a set mixing sources and constellations is not a mode there
+        is_c = jnp.asarray(n_src == 0)[:, None]
+        mixed = jnp.asarray((n_src > 0) & (c0 < C))[:, None]
+        prior = jnp.where(is_c, priors(jnp.zeros_like(ps), pc), priors(ps, jnp.zeros_like(pc)))
+        dist_s, tail_s = _event_tails(ps, r_enum)
+        dist_c, tail_c = _event_tails(pc, r_enum)
+
+        def family_order(dist, tail, thr):
+            tails, above = [], tail  # P(more than k), k = r_enum .. 1
+            for k in range(r_enum, 0, -1):
+                tails.insert(0, above)
+                above = above + dist[k]
+            ok = jnp.stack([t <= thr for t in tails])
+            n = jnp.where(jnp.any(ok, axis=0), jnp.argmax(ok, axis=0) + 1, r_enum)
+            return n, jnp.choose(n - 1, tails, mode="clip")
+
+        n_s, nm_s = family_order(dist_s, tail_s, rule.sat_share * budget.p_thresh)
+        n_co, nm_c = family_order(dist_c, tail_c, (1.0 - rule.sat_share) * budget.p_thresh)
+        k_t = jnp.asarray(order_t)[:, None]
+        selected = exists & ~mixed & jnp.where(is_c, k_t <= n_co[None], k_t <= n_s[None])
+        p_beyond = nm_s + nm_c + _usum(jnp.where(selected[T:], prior[T:], 0.0), 0)
+        full_flag = (n_s > max_order) | (n_co > max_order)
+        sel = selected[:T]
+    else:
+        prior = priors(ps, pc)
+        _, tail = _event_tails(jnp.concatenate([ps, pc], axis=0), r_enum)
+        cand = exists
+        labpad = _pad(lab, -1)
+        if rule.consolidated:
+            # fold every set inside one constellation c (its sources all in c, its
+            # constellation, if any, c itself; not c's own mode) with prior below fc_thres x
+            # prior(c) into c's mode (MAAST determine_subsets_v5, one pass per constellation)
+            fold, mass = [], []
+            for c in range(C):
+                cnt = (labpad[s0] == c).astype(jnp.int32) + (labpad[s1] == c)
+                inside = ((cnt == jnp.asarray(n_src)[:, None])
+                          & jnp.asarray((n_src > 0) & within[:, c])[:, None] & exists)
+                f = linalg.materialize(inside & (prior < rule.fc_thres * prior[own[c]][None]))
+                fold.append(f)
+                mass.append(_usum(jnp.where(f, prior, 0.0), 0))
+            rows = [prior[t] for t in range(E)]
+            for c in range(C):
+                rows[own[c]] = rows[own[c]] + mass[c]
+            prior = _blocks_rows(rows, prior)
+            cand = linalg.materialize(exists & ~functools.reduce(jnp.logical_or, fold))
+        cp = linalg.materialize(jnp.where(cand, prior, 0.0))
+        idx = np.arange(E)
+        if rule.name == "add-v4.2":
+            # sources out: named sources + the constellations' sources - those counted twice
+            ncpad = _pad(n_c, 0)
+            n_out = jnp.asarray(n_src)[:, None] + ncpad[c0] + ncpad[c1]
+            if np.any((n_src > 0) & (c0 < C)):
+                for s in (s0, s1):
+                    ls = labpad[s]
+                    n_out = n_out - (((ls == jnp.asarray(c0)[:, None])
+                                      | (ls == jnp.asarray(c1)[:, None])) & (ls >= 0))
+            n_out = linalg.materialize(n_out)
+            forced = cand & (prior > budget.phmi_v + budget.phmi_h)
+            other = linalg.materialize(jnp.where(forced, 0.0, cp))
+            ni = n_out[:T]
+            suffix = jnp.broadcast_to(tail, ni.shape)
+            for j in range(T):  # slots: sources out, then enumeration order
+                nj = n_out[j][None]
+                after = (nj > ni) | ((nj == ni) & jnp.asarray(idx[:T] <= j)[:, None])
+                suffix = suffix + jnp.where(after, other[j][None], 0.0)
+            if E > T:
+                # the sets beyond the slots come after every slot with as many sources out or
+                # fewer (they are later in the enumeration): one sum per distinct slot count
+                # (the singles: 1; each constellation mode: its n_c)
+                beyond = _usum(other[T:], 0)
+                per_c = []
+                for c in range(C):
+                    g = 0.0
+                    for j in range(T, E):
+                        g = g + jnp.where(n_out[j] >= n_c[c], other[j], 0.0)
+                    per_c.append(g)
+                slot_c = np.array([c0[t] if (n_src[t] == 0 and c1[t] == C) else -1
+                                   for t in range(T)])
+                extra = jnp.stack([beyond if slot_c[t] < 0 else per_c[slot_c[t]]
+                                   for t in range(T)])
+                extra = jnp.where(jnp.asarray(n_src[:T] == 1)[:, None] | jnp.asarray(
+                    slot_c >= 0)[:, None], extra, 0.0)
+                if np.any((n_src[:T] != 1) & (slot_c < 0)):
+                    raise AssertionError("sets beyond the slots need order-1 slots")
+                suffix = suffix + extra
+            sel = forced[:T] | (cand[:T] & (suffix > budget.p_thresh))
+            if full and E > T:
+                # the first unforced set beyond the slots in the walk's order: the walk
+                # reaches it with the most P_NM left of them all
+                key = jnp.where(cand[T:] & ~forced[T:], n_out[T:] * E + idx[T:, None], jnp.inf)
+                first = _umin(key, 0)
+                ahead = jnp.where(n_out * E + idx[:, None] >= first[None], other, 0.0)
+                full_flag = _uany(forced[T:], 0) | (
+                    jnp.isfinite(first) & (tail + _usum(ahead, 0) > budget.p_thresh))
+        else:  # add-v3, add-v3-consolidated: order, then decreasing prior, then index
+            k = order_t
+            ci = cp[:T]
+            higher = {o: _usum(cp[k > o], 0) for o in sorted(set(k[:T].tolist()))}
+            suffix = tail[None] + jnp.stack([higher[o] for o in k[:T].tolist()])
+            for j in range(T):  # same order: decreasing prior, ties in enumeration order
+                same = jnp.asarray(k[:T] == k[j])[:, None]
+                cj = cp[j][None]
+                after = same & ((cj < ci) | ((cj == ci) & jnp.asarray(idx[:T] <= j)[:, None]))
+                suffix = suffix + jnp.where(after, cj, 0.0)
+            sel = cand[:T] & (suffix > budget.p_thresh)
+            if full and E > T:
+                # the walk reaches the sets beyond the slots (all of a higher order) with
+                # the tail and their own mass left
+                full_flag = _uany(cand[T:], 0) & (tail + _usum(cp[T:], 0) > budget.p_thresh)
+        p_beyond = (tail + _usum(jnp.where(cand[:T] & ~sel, prior[:T], 0.0), 0)
+                    + _usum(cp[T:], 0))
+    sel = linalg.materialize(sel)
+
+    # the slots: exclusion sets, duplicates merged into the first selected one
+    t0, t1, k0, k1 = s0[:T], s1[:T], c0[:T], c1[:T]
+    lidx = np.arange(L)[None, :, None]
+    excluded = valid[None] & ((lidx == t0[:, None, None]) | (lidx == t1[:, None, None])
+                              | (lab[None] == k0[:, None, None]) | (lab[None] == k1[:, None, None]))
+    two = 2.0 ** np.arange(L)
+    code_c = _pad(_usum(jnp.where(member, jnp.asarray(two, dtype)[:, None, None], 0.0), 0), 0.0)
+    labpad = _pad(lab, -1)
+    code = code_c[k0] + code_c[k1]
+    for s in (t0, t1):  # a named source not inside a named constellation
+        ls = labpad[s]
+        named = jnp.asarray(s < L)[:, None] & _pad(valid, False)[s]
+        inside = (ls == jnp.asarray(k0)[:, None]) | (ls == jnp.asarray(k1)[:, None])
+        code = code + jnp.where(named & ~inside, jnp.asarray(two[np.minimum(s, L - 1)],
+                                                             dtype)[:, None], 0.0)
+    code = linalg.materialize(code)
+    pr = prior[:T]
+    dup = jnp.zeros(sel.shape, bool)
+    merged = jnp.zeros(pr.shape, dtype)
+    for j in range(T):
+        same = (code[j][None] == code) & sel[j][None] & sel
+        dup = dup | (same & jnp.asarray(np.arange(T) > j)[:, None])
+        merged = merged + jnp.where(same, pr[j][None], 0.0)
+    live = sel & ~dup
+    prior_out = jnp.where(live, merged, 0.0)
+    excl_c = jnp.asarray((np.arange(C)[None] == k0[:, None]) | (np.arange(C)[None] == k1[:, None])
+                         )[:, :, None] & present[None]  # (T, C, B)
+    order = _umax(jnp.where(live, jnp.asarray(order_t[:T])[:, None], 0), 0)
+    p0 = jnp.prod(1.0 - ps, axis=0) * jnp.prod(1.0 - pc, axis=0)
+    return FaultModes(excluded, excl_c, prior_out, live, order, p_beyond, p0, full_flag)
+
+
+def select_fault_modes(valid, constellation, p_sat, p_const, budget, rule: FaultModeRule,
+                       max_order: int) -> FaultModes:
+    """The kernels' fault modes under ``rule``, batch-last: (L, B) inputs, p_const (C, B)."""
+    if rule.events:
+        return event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule,
+                                      max_order)
+    return fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
+                                  max_order)
+
+
+def check_order(rule: FaultModeRule, max_order: int) -> int:
+    """``max_order`` within what ``rule`` enumerates, or a ValueError naming both."""
+    if max_order > rule.max_order:
+        raise ValueError(f"max_order={max_order} is above what fault_modes={rule.name!r} "
+                         f"enumerates ({rule.max_order}); use max_order <= {rule.max_order} "
+                         "or fault_modes='grouped'")
+    return max_order

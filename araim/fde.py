@@ -23,7 +23,13 @@ import jax.numpy as jnp
 from oaraim.araim import linalg
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fault_modes import to_batch_first, to_batch_last
+from oaraim.araim.fault_modes import (
+    DEFAULT_RULE,
+    check_order,
+    fault_mode_rule,
+    to_batch_first,
+    to_batch_last,
+)
 from oaraim.araim.mhss import (
     PL_ITERATIONS,
     MHSSResult,
@@ -60,9 +66,9 @@ class FDEResult(NamedTuple):
 
 
 def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
-                     budget, max_order, weighting, iterations):
+                     budget, max_order, weighting, iterations, fault_modes=DEFAULT_RULE):
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    pr = _project(*args, budget, max_order, weighting)
+    pr = _project(*args, budget, max_order, weighting, fault_modes=fault_modes)
     yl = jnp.where(args[7], to_batch_last(y, 1), 0.0)  # (L, B)
     shift = jnp.sum(pr.s_pos * yl[None, None], axis=2)  # (K, 3, B)
     sep = jnp.where(pr.monitored[:, None], shift - shift[:1], 0.0)
@@ -87,12 +93,16 @@ def _flatten(arrays, batch):
     return [x.reshape((-1,) + x.shape[len(batch):]) for x in arrays]
 
 
-@partial(jit_kernel, static_argnames=("budget", "max_order", "weighting", "iterations"))
+_STATIC = ("budget", "max_order", "weighting", "iterations", "fault_modes")
+
+
+@partial(jit_kernel, static_argnames=_STATIC)
 def _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y, budget,
-                max_order, weighting="int", iterations=PL_ITERATIONS):
+                max_order, weighting="int", iterations=PL_ITERATIONS, fault_modes=DEFAULT_RULE):
     batch = g.shape[:-2]
     out = _separation_flat(*_flatten((g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                      valid, y), batch), budget, max_order, weighting, iterations)
+                                      valid, y), batch), budget, max_order, weighting, iterations,
+                           fault_modes)
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 
@@ -113,11 +123,12 @@ def _wsse(g, constellation, var_int, valid, y, n_constellations):
     return jnp.where(ok, jnp.sum(w * r**2, axis=-1), jnp.inf)
 
 
-@partial(jit_kernel, static_argnames=("budget", "max_order", "weighting", "iterations"))
+@partial(jit_kernel, static_argnames=_STATIC)
 def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
-                        budget, max_order, weighting="int", iterations=PL_ITERATIONS):
+                        budget, max_order, weighting="int", iterations=PL_ITERATIONS,
+                        fault_modes=DEFAULT_RULE):
     top = _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
-                      budget, max_order, weighting, iterations)
+                      budget, max_order, weighting, iterations, fault_modes)
     # candidate subsets: one per mode (axis K moved to the front as a batch axis)
     keep = valid[..., None, :] & ~top.excluded  # (..., K, L)
     cand_valid = jnp.moveaxis(keep, -2, 0)  # (K, ..., L)
@@ -127,7 +138,8 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
         return jnp.broadcast_to(x, (k,) + x.shape)
 
     sub = _separation(bc(g), bc(constellation), bc(var_int), bc(var_acc), bc(b_nom), bc(p_sat),
-                      bc(p_const), cand_valid, bc(y), budget, max_order, weighting, iterations)
+                      bc(p_const), cand_valid, bc(y), budget, max_order, weighting, iterations,
+                      fault_modes)
     wsse = _wsse(bc(g), bc(constellation), bc(var_int), cand_valid, bc(y), p_const.shape[-1])
     candidate = jnp.moveaxis(top.monitored, -1, 0)  # (K, ...)
     acceptable = candidate & ~sub.detected & (sub.pl.status == Status.OK)
@@ -163,9 +175,11 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
 
 
 def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-                   valid, max_order, all_in_view_weighting):
+                   valid, max_order, all_in_view_weighting, fault_modes=None):
     """The receiver's inputs broadcast and checked (``prepare_inputs``), the budget and the
-    weighting checked, and the static order (``required_order`` when None): (args, order)."""
+    weighting checked, and the static order (``required_order`` when None): (args, order).
+    ``fault_modes`` is checked by ``fault_mode_rule`` (call it first to get the rule)."""
+    rule = fault_mode_rule(fault_modes)
     if not isinstance(budget, IntegrityBudget):
         raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
                          "araim.BUDGET_SEED004_TABLE_I")
@@ -175,40 +189,48 @@ def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
     args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                           valid)
     if max_order is None:
-        max_order = required_order(args[7], args[1], args[5], args[6], budget.p_thresh)
+        max_order = required_order(args[7], args[1], args[5], args[6], budget,
+                                   fault_modes=rule)
     else:
-        max_order = check_int("max_order", max_order, 1)
+        max_order = check_order(rule, check_int("max_order", max_order, 1))
     return args, max_order
 
 
 def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-            residual_m, valid, max_order, all_in_view_weighting):
+            residual_m, valid, max_order, all_in_view_weighting, fault_modes):
+    rule = fault_mode_rule(fault_modes)
     args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                                     p_const, budget, valid, max_order, all_in_view_weighting)
+                                     p_const, budget, valid, max_order, all_in_view_weighting,
+                                     rule)
     y = jnp.broadcast_to(jnp.asarray(residual_m, jnp.float64), args[0].shape[:-1])
-    return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting)
+    return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
+              fault_modes=rule)
 
 
 def solution_separation(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                         budget, residual_m, valid=None, *, max_order=None,
-                        all_in_view_weighting="int") -> Separation:
+                        all_in_view_weighting="int", fault_modes=None) -> Separation:
     """Solution-separation statistics and detection (seed 004 eqs. 9-13) for measured residuals.
 
     Arguments as ``protection_levels`` plus ``residual_m`` (..., L): y = z - z_hat at the
     all-in-view linearisation point (metres). Returns ``Separation``: per mode and direction the
-    separation, threshold and tau; ``detected`` is any tau > 1.
+    separation, threshold and tau; ``detected`` is any tau > 1. ``fault_modes``: the
+    convention, as ``protection_levels``.
     """
     return _public(_separation, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting)
+                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting,
+                   fault_modes)
 
 
 def detect_and_exclude(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                        budget, residual_m, valid=None, *, max_order=None,
-                       all_in_view_weighting="int") -> FDEResult:
+                       all_in_view_weighting="int", fault_modes=None) -> FDEResult:
     """Detection, then exclusion over the monitored fault modes (module docstring).
 
     Returns ``FDEResult``: ``excluded`` marks the sources removed, ``pl`` the PLs of the solution
     kept (all-in-view when nothing was detected), ``position_m`` its ENU correction S y.
+    ``fault_modes``: the convention, as ``protection_levels`` (every candidate subset uses it).
     """
     return _public(_detect_and_exclude, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting)
+                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting,
+                   fault_modes)

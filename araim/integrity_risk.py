@@ -64,7 +64,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fault_modes import fault_modes_batch_last, to_batch_first, to_batch_last
+from oaraim.araim.fault_modes import (
+    DEFAULT_RULE,
+    fault_mode_rule,
+    select_fault_modes,
+    to_batch_first,
+    to_batch_last,
+)
 from oaraim.araim.fde import _separation, _wsse, checked_inputs
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
@@ -127,13 +133,13 @@ class Outcome(NamedTuple):
     max_tau: jax.Array
 
 
-def _exclusion_sets(valid, constellation, p_sat, p_const, p_thresh, max_order):
+def _exclusion_sets(valid, constellation, p_sat, p_const, budget, max_order, rule):
     """(..., K, L): the sources each mode of the template excludes (mode 0: none), as the
     receiver's kernel builds them (``fault_modes``)."""
     batch = valid.shape[:-1]
-    fm = fault_modes_batch_last(to_batch_last(valid, 1), to_batch_last(constellation, 1),
-                                to_batch_last(p_sat, 1), to_batch_last(p_const, 1), p_thresh,
-                                max_order)
+    fm = select_fault_modes(to_batch_last(valid, 1), to_batch_last(constellation, 1),
+                            to_batch_last(p_sat, 1), to_batch_last(p_const, 1), budget, rule,
+                            max_order)
     ex = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)  # (K, L, B)
     return to_batch_first(ex, batch)
 
@@ -153,9 +159,9 @@ def _add_unit_axis(args, n_units, axis_of_sources):
 _TAILS = (2, 1, 1, 1, 1, 1, 1, 1)
 
 
-@partial(jax.jit, static_argnames=("budget", "max_order", "weighting"))
+@partial(jax.jit, static_argnames=("budget", "max_order", "weighting", "fault_modes"))
 def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget, max_order,
-          weighting):
+          weighting, fault_modes=DEFAULT_RULE):
     L = g.shape[-2]
     C = p_const.shape[-1]
     eye = jnp.eye(L)
@@ -163,13 +169,14 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
     # candidate subsets: each mode's kept sources as a new all-in-view set; candidate 0 keeps
     # every source, so it is the receiver's own all-in-view solution (one kernel call, traced
     # and compiled once, serves both)
-    excluded = _exclusion_sets(valid, constellation, p_sat, p_const, budget.p_thresh,
-                               max_order)  # (..., K, L)
+    excluded = _exclusion_sets(valid, constellation, p_sat, p_const, budget, max_order,
+                               fault_modes)  # (..., K, L)
     keep = valid[..., None, :] & ~excluded
     K = keep.shape[-2]
     cargs = _add_unit_axis(args, K, _TAILS)[:-1] + [keep]
     sub = _separation(*_add_unit_axis(cargs, L, _TAILS), jnp.broadcast_to(
-        eye, keep.shape[:-1] + (L, L)), budget, max_order, weighting)
+        eye, keep.shape[:-1] + (L, L)), budget, max_order, weighting,
+        fault_modes=fault_modes)
     top = jax.tree.map(lambda x: x[(Ellipsis, 0) + (slice(None),) * (x.ndim - valid.ndim)],
                        sub)  # candidate 0: (..., L units, ...)
     s0 = jnp.swapaxes(top.position_m, -1, -2)  # (..., 3, L)
@@ -214,12 +221,16 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
 
 
 def monitor_maps(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-                 valid=None, *, max_order=None, all_in_view_weighting="int") -> MonitorMaps:
+                 valid=None, *, max_order=None, all_in_view_weighting="int",
+                 fault_modes=None) -> MonitorMaps:
     """The MHSS receiver of ``detect_and_exclude`` as linear maps of the residual (module
     docstring). Arguments as ``araim.protection_levels`` (variances, m^2); batch first."""
+    rule = fault_mode_rule(fault_modes)
     args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                                     p_const, budget, valid, max_order, all_in_view_weighting)
-    return _maps(*args, budget=budget, max_order=max_order, weighting=all_in_view_weighting)
+                                     p_const, budget, valid, max_order, all_in_view_weighting,
+                                     rule)
+    return _maps(*args, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
+                 fault_modes=rule)
 
 
 def _tau(d, thr):

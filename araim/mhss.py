@@ -48,8 +48,13 @@ from oaraim.araim import linalg
 from oaraim.araim.batching import CHUNK, jit_kernel, map_chunks, map_threads, slice_rows
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
-    fault_modes_batch_last,
-    mode_template,
+    DEFAULT_RULE,
+    FaultModeRule,
+    check_order,
+    event_modes_batch_last,
+    fault_mode_rule,
+    select_fault_modes,
+    template_source,
     to_batch_first,
     to_batch_last,
 )
@@ -390,11 +395,13 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
 
 
 def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
-             max_order, all_in_view_weighting, single_downdates=True, input_flags=False):
+             max_order, all_in_view_weighting, single_downdates=True, input_flags=False,
+             fault_modes: FaultModeRule = DEFAULT_RULE):
     """Batch-last: g (L, 3, B); constellation, var_*, b_nom, p_sat, valid (L, B); p_const
     (C, B). ``single_downdates`` computes the L single-source modes by rank-one downdates of
     the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky.
-    ``input_flags``: returns (Projection, ``_input_flags``) instead."""
+    ``input_flags``: returns (Projection, ``_input_flags``) instead. ``fault_modes``: the
+    convention (``araim.FaultModeRule``)."""
     C = p_const.shape[0]
     L = valid.shape[0]
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
@@ -406,8 +413,8 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     # caller's batch-first arrays cost 4 % of the kernel)
     flags = (_input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
              if input_flags else None)
-    fm = fault_modes_batch_last(valid, constellation, p_sat, p_const, budget.p_thresh,
-                                max_order)
+    fm = select_fault_modes(valid, constellation, p_sat, p_const, budget, fault_modes,
+                            max_order)
     g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: note above ``_blocks``)
     w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
@@ -423,7 +430,7 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
         # the all-in-view solution and the whole-constellation modes on clock-eliminated rows,
         # the singles by downdates of the all-in-view inverse, other modes (a source and
         # whole constellations, order >= 2) by their own Cholesky; assembled in template order
-        src = np.asarray(mode_template(L, C, max_order).source)
+        src = template_source(fault_modes, L, C, max_order)
         rest = np.arange(L, src.size)
         whole = rest[src[rest] < 0]
         gt, inv_s_src = _centered_rows(g, w_int, member)
@@ -960,11 +967,12 @@ def _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
 
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                             budget, max_order, all_in_view_weighting, iterations,
-                            input_flags=False):
+                            input_flags=False, fault_modes=DEFAULT_RULE):
     """One flat batch (B, ...) in and out; batch-last inside. ``input_flags``: returns
     (MHSSResult, ``_input_flags``)."""
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    pr = _project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags)
+    pr = _project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags,
+                  fault_modes=fault_modes)
     if input_flags:
         pr, flags = pr
     pl, status, emt = _pls_from_projection(pr, budget, iterations)
@@ -979,7 +987,7 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
 
 def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                        budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS,
-                       input_flags=False):
+                       input_flags=False, fault_modes=DEFAULT_RULE):
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
     cache-sized chunks (``araim.batching``). ``input_flags`` also returns ``_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
@@ -991,21 +999,23 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
 
     def kernel(*xs):
         return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
-                                       iterations, input_flags)
+                                       iterations, input_flags, fault_modes)
 
     return map_chunks(kernel, arrays, batch)
 
 
-_STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags")
+_STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags",
+           "fault_modes")
 _protection_levels_jit = jit_kernel(_protection_levels, static_argnames=_STATIC)
 
 
 def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_weighting="int",
-                            iterations=PL_ITERATIONS, input_flags=False):
+                            iterations=PL_ITERATIONS, input_flags=False,
+                            fault_modes=DEFAULT_RULE):
     """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
     program (``araim.batching.map_threads``'s ``part_fn``)."""
     return _protection_levels(*slice_rows(args, start, size), budget, max_order,
-                              all_in_view_weighting, iterations, input_flags)
+                              all_in_view_weighting, iterations, input_flags, fault_modes)
 
 
 _protection_levels_part_jit = jit_kernel(_protection_levels_part,
@@ -1108,12 +1118,36 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True):
                              f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
 
 
-def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_ORDER):
-    """Smallest order r (number of simultaneously faulty constellations) meeting P_thresh for
-    every geometry of the batch, at most ``cap``."""
-    r_max = max(1, min(cap, p_const.shape[-1]))
+def required_order(valid, constellation, p_sat, p_const, budget, cap=MAX_AUTO_ORDER,
+                   fault_modes=None):
+    """Smallest template order meeting the convention for every geometry of the batch, at most
+    ``cap``. ``grouped``: the number of simultaneously faulty constellations r with
+    P(more than r) <= P_thresh (``budget`` may then be P_thresh alone); event conventions
+    (``budget`` an ``IntegrityBudget``): the smallest order at which no geometry would monitor
+    a set beyond it (at most 2)."""
+    if isinstance(budget, IntegrityBudget):
+        rule = fault_mode_rule(fault_modes)
+        p_thresh = budget.p_thresh
+    else:
+        rule = fault_mode_rule("grouped" if fault_modes is None else fault_modes)
+        p_thresh = float(budget)
+        if rule.events:
+            raise ValueError(f"fault_modes={rule.name!r} needs the IntegrityBudget, "
+                             "not P_thresh alone")
     if valid.size == 0:
         return 1
+    if rule.events:
+        r_max = max(1, min(cap, rule.max_order))
+        try:
+            for r in range(1, r_max):
+                if not bool(_needs_higher_order(valid, constellation, p_sat, p_const, budget,
+                                                rule, r)):
+                    return r
+        except jax.errors.TracerArrayConversionError:
+            raise ValueError("max_order=None needs concrete probabilities; under jit pass "
+                             "max_order (e.g. 1)") from None
+        return r_max
+    r_max = max(1, min(cap, p_const.shape[-1]))
     try:
         worst = np.asarray(_worst_tails(valid, constellation, p_sat, p_const, r_max))
     except jax.errors.TracerArrayConversionError:
@@ -1123,6 +1157,22 @@ def required_order(valid, constellation, p_sat, p_const, p_thresh, cap=MAX_AUTO_
         if worst[r - 1] <= p_thresh:  # NaN never is
             return r
     return r_max
+
+
+def _needs_flat(valid, constellation, p_sat, p_const, budget, rule, order):
+    fm = event_modes_batch_last(to_batch_last(valid, 1), to_batch_last(constellation, 1),
+                                to_batch_last(p_sat, 1), to_batch_last(p_const, 1), budget,
+                                rule, order, full=True)
+    return fm.needs_higher_order | (fm.p_beyond_order > budget.p_thresh)
+
+
+@functools.partial(jax.jit, static_argnames=("budget", "rule", "order"))
+def _needs_higher_order(valid, constellation, p_sat, p_const, budget, rule, order):
+    """Whether any geometry of the batch needs a template above ``order`` (event rules)."""
+    batch = valid.shape[:-1]
+    flags = map_chunks(functools.partial(_needs_flat, budget=budget, rule=rule, order=order),
+                       (valid, constellation, p_sat, p_const), batch, chunk=4 * CHUNK)
+    return jnp.any(flags)
 
 
 def _tails_flat(valid, constellation, p_sat, p_const, r_max):
@@ -1147,7 +1197,7 @@ def _worst_tails(valid, constellation, p_sat, p_const, r_max):
 
 def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                       budget, valid=None, *, max_order=None, all_in_view_weighting="int",
-                      threads=None):
+                      threads=None, fault_modes=None):
     """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
 
     Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int
@@ -1162,14 +1212,18 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
       p_sat: P_s per source (..., L); p_const: P_const per constellation (..., C).
       budget: ``IntegrityBudget`` (e.g. ``BUDGET_SEED004_TABLE_I``).
       valid: (..., L) bool, sources used (in view, healthy, not padding).
-      max_order: most simultaneously faulty constellations monitored; None picks the smallest
-        meeting P_thresh over the batch (up to 3). Geometries needing more get status
-        UNMONITORED_RISK.
+      max_order: the template order: most simultaneous events (event conventions, up to 2) or
+        faulty constellations (``grouped``, up to 3) a monitored mode stands for; None picks
+        the smallest the convention needs over the batch. Geometries needing more get status
+        UNMONITORED_RISK (their unmonitored priors stay in P_NM).
       all_in_view_weighting: "int" (C_int^-1, ADD/MAAST, default) or "acc" (seed 004 after
         eq. 5).
       threads: host threads over which a large batch is split (default
         ``araim.batching.default_threads()``: ``OARAIM_THREADS`` or 2); results do not depend
         on it.
+      fault_modes: the fault-mode convention, a name or ``araim.FaultModeRule``: ``add-v4.2``
+        (default, the current ADD), ``add-v3``, ``add-v3-consolidated``, ``blanch-2012``,
+        ``grouped`` (docs/conformance.md).
 
     Returns:
       ``MHSSResult``; every PL is inf where status != OK, never NaN.
@@ -1180,8 +1234,9 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
     if not isinstance(budget, IntegrityBudget):
         raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
                          "araim.BUDGET_SEED004_TABLE_I")
+    rule = fault_mode_rule(fault_modes)
     if max_order is not None:
-        max_order = check_int("max_order", max_order, 1)
+        max_order = check_order(rule, check_int("max_order", max_order, 1))
     if threads is not None:
         threads = check_int("threads", threads, 1)
     # with max_order given, the per-source range checks run inside the kernel (one fused pass
@@ -1190,11 +1245,12 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
     args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                           valid, check_sources=max_order is None)
     if max_order is None:
-        max_order = required_order(args[7], args[1], args[5], args[6], budget.p_thresh)
+        max_order = required_order(args[7], args[1], args[5], args[6], budget,
+                                   fault_modes=rule)
         return protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                          threads)
+                                          threads, fault_modes=rule)
     res, flags = protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                            threads, input_flags=True)
+                                            threads, input_flags=True, fault_modes=rule)
     try:
         flagged = bool(np.any(np.asarray(flags)))
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
@@ -1207,12 +1263,13 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
 
 
 def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="int",
-                               threads=None, input_flags=False):
+                               threads=None, input_flags=False, fault_modes=DEFAULT_RULE):
     """The jitted kernel on ``prepare_inputs`` output, large batches split over host threads
     (``araim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores).
     ``input_flags``: returns (MHSSResult, ``_input_flags``)."""
     static = dict(budget=budget, max_order=max_order,
-                  all_in_view_weighting=all_in_view_weighting, input_flags=input_flags)
+                  all_in_view_weighting=all_in_view_weighting, input_flags=input_flags,
+                  fault_modes=fault_mode_rule(fault_modes))
 
     def fn(*xs):
         return _protection_levels_jit(*xs, **static)

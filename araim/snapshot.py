@@ -260,7 +260,7 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
            correction_m=0.0, constellation=None, p_const=(1e-8,), p_sat=1e-5, b_nom_m=0.75,
            budget: IntegrityBudget = BUDGET_SEED004_TABLE_I, p_fa=DEFAULT_P_FA,
            p_md=DEFAULT_P_MD, slope_sigma_m=None, x0_m=None, n_iter=10, max_order=None,
-           frame="ecef", monitors=("slope", "mhss")) -> ReplayResult:
+           frame="ecef", monitors=("slope", "mhss"), fault_modes=None) -> ReplayResult:
     """Snapshot replay of T epochs of L sources (module docstring).
 
     Args:
@@ -289,6 +289,8 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
       monitors: which integrity monitors to run, among "slope" (seed 001) and "mhss" (seed
         004); one left out is ``None`` in the result (the MHSS with exclusion compiles for
         ~15-30 s per (L, C) shape on a 2-core CPU; a slope-only replay needs ~2 s).
+      fault_modes: the MHSS fault-mode convention (``araim.protection_levels``; default
+        ``add-v4.2``, the current ADD).
 
     Returns:
       ``ReplayResult``; every PL and error is finite or inf, never NaN.
@@ -344,14 +346,15 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
         pc0 = np.broadcast_to(p_const, shape[:1] + (n_clocks,))
         max_order = required_order(used, jnp.asarray(cons), jnp.asarray(
             np.broadcast_to(np.asarray(p_sat, np.float64), shape)), jnp.asarray(pc0),
-            budget.p_thresh)
+            budget, fault_modes=fault_modes)
     slope = mhss = None
     if "slope" in monitors:
         slope = _slope_monitor(sol, g, sigma, used, cons, used_epoch, truth, p_fa, p_md,
                                n_clocks, frame_ecef)
     if "mhss" in monitors:
         mhss = _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat,
-                             b_nom_m, p_const, budget, int(max_order), frame_ecef)
+                             b_nom_m, p_const, budget, int(max_order), frame_ecef,
+                             fault_modes)
     return ReplayResult(sol, g, used, err, hpe, vpe, slope, mhss,
                         0 if max_order is None else int(max_order))
 
@@ -369,7 +372,7 @@ def _slope_monitor(sol, g, sigma, used, cons, used_epoch, truth, p_fa, p_md, n_c
 
 
 def _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat, b_nom_m,
-                  p_const, budget, max_order, frame_ecef):
+                  p_const, budget, max_order, frame_ecef, fault_modes=None):
     """MHSS all-in-view PLs, detection and exclusion with the residuals (step 4)."""
     shape = used.shape
     n_clocks = int(p_const.shape[-1])
@@ -379,9 +382,10 @@ def _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat
     var_acc_u = np.where(np.asarray(used), var_acc, 1.0)
     pc = np.broadcast_to(p_const, shape[:1] + (n_clocks,))
     pl = protection_levels(g, cons, var_int_u, var_acc_u, b_nom, p_sat_a, pc, budget,
-                           valid=used, max_order=max_order)
+                           valid=used, max_order=max_order, fault_modes=fault_modes)
     fde = detect_and_exclude(g, cons, var_int_u, var_acc_u, b_nom, p_sat_a, pc, budget,
-                             sol.residual_m, valid=used, max_order=max_order)
+                             sol.residual_m, valid=used, max_order=max_order,
+                             fault_modes=fault_modes)
     pos, m_err, m_hpe, m_vpe = _mhss_terms(sol.position_m, fde.position_m, used_epoch, truth,
                                            frame_ecef)
     sep_tau = jnp.max(jnp.where(jnp.isfinite(fde.tau), fde.tau, 0.0), axis=(-2, -1))

@@ -156,6 +156,104 @@ def fault_mode_set(valid, constellation, p_sat, p_const, p_thresh, max_order):
     return fm
 
 
+EVENT_RULES = ("add-v4.2", "add-v3", "add-v3-consolidated", "blanch-2012")
+
+
+def event_fault_mode_set(valid, constellation, p_sat, p_const, budget, rule="add-v4.2",
+                         max_order=2, fc_thres=0.01, sat_share=0.5):
+    """The event conventions of ``araim.FaultModeRule`` for one geometry, by enumeration.
+
+    Events: every valid source and every present constellation. Every set E of up to R events
+    (R = max(max_order, 2) when consolidating, else max_order) gets the exact prior
+    P0 prod_{e in E} p_e / (1 - p_e); the folding, the selection and P_NM = 1 - P0 - sum of the
+    monitored priors follow the rule's docstring literally (a sorted list walked until P_NM
+    fits); selected sets of more than ``max_order`` events are not monitored (they stay in
+    P_NM); selected sets with the same exclusion set are one mode, priors summed.
+    """
+    valid = np.asarray(valid, bool)
+    constellation = np.asarray(constellation, int)
+    p_sat = np.asarray(p_sat, float)
+    p_const = np.asarray(p_const, float)
+    present = sorted({int(c) for c in constellation[valid]})
+    sources = {c: [int(l) for l in np.flatnonzero(valid & (constellation == c))] for c in present}
+    events = [("s", int(l)) for l in np.flatnonzero(valid)] + [("c", c) for c in present]
+    p_ev = {e: (p_sat[e[1]] if e[0] == "s" else p_const[e[1]]) for e in events}
+
+    def union(subset):
+        out = set()
+        for kind, i in subset:
+            out |= {i} if kind == "s" else set(sources[i])
+        return frozenset(out)
+
+    def product(subset, family):
+        p0 = np.prod([1.0 - p_ev[e] for e in family])
+        return float(p0 * np.prod([p_ev[e] / (1.0 - p_ev[e]) for e in subset]))
+
+    consolidated = rule in ("add-v4.2", "add-v3-consolidated")
+    r_enum = max(max_order, 2) if consolidated else max_order
+    # (subset, prior) in MAAST's enumeration order; a list entry per set
+    listing = [(sub, product(sub, events)) for k in range(1, r_enum + 1)
+               for sub in itertools.combinations(events, k)]
+    if rule == "blanch-2012":
+        sats = [e for e in events if e[0] == "s"]
+        consts = [e for e in events if e[0] == "c"]
+
+        def family_order(family, thr):
+            pmf = poisson_binomial_pmf([p_ev[e] for e in family])
+            for n in range(1, r_enum + 1):
+                if pmf[n + 1:].sum() <= thr:
+                    return n, float(pmf[n + 1:].sum())
+            return r_enum, float(pmf[r_enum + 1:].sum())
+
+        n_s, nm_s = family_order(sats, sat_share * budget.p_thresh)
+        n_c, nm_c = family_order(consts, (1.0 - sat_share) * budget.p_thresh)
+        selected = [(sub, product(sub, sats)) for k in range(1, n_s + 1)
+                    for sub in itertools.combinations(sats, k)]
+        selected += [(sub, product(sub, consts)) for k in range(1, n_c + 1)
+                     for sub in itertools.combinations(consts, k)]
+        p_nm = nm_s + nm_c
+    else:
+        if consolidated:
+            for c in present:
+                entry = next(i for i, (sub, _) in enumerate(listing) if sub == (("c", c),))
+                base = listing[entry][1]
+                inside = [i for i, (sub, pr) in enumerate(listing)
+                          if i != entry and union(sub) and union(sub) <= set(sources[c])
+                          and all(e[0] == "s" or e[1] == c for e in sub)
+                          and pr < fc_thres * base]
+                listing[entry] = (listing[entry][0],
+                                  base + sum(listing[i][1] for i in inside))
+                listing = [x for i, x in enumerate(listing) if i not in set(inside)]
+        p0 = float(np.prod([1.0 - p for p in p_ev.values()]))
+        if rule == "add-v4.2":
+            phmi = budget.phmi_v + budget.phmi_h
+            forced = [x for x in listing if x[1] > phmi]
+            others = sorted([x for x in listing if x[1] <= phmi], key=lambda x: len(union(x[0])))
+            p_nm = 1.0 - p0 - sum(pr for _, pr in forced)
+            selected = list(forced)
+        else:
+            others = sorted(listing, key=lambda x: (len(x[0]), -x[1]))
+            p_nm = 1.0 - p0
+            selected = []
+        for sub, pr in others:  # sorted() is stable: ties keep the enumeration order
+            if p_nm <= budget.p_thresh:
+                break
+            selected.append((sub, pr))
+            p_nm -= pr
+    modes, order = {}, 0
+    for sub, pr in selected:
+        if len(sub) > max_order:
+            p_nm += pr  # no slot for it: it stays unmonitored
+            continue
+        order = max(order, len(sub))
+        excl = union(sub)
+        modes[excl] = modes.get(excl, 0.0) + pr
+    fm = FaultModeSet(present, sources, {}, {}, {}, {}, order,
+                      float(np.prod([1.0 - p for p in p_ev.values()])), max(float(p_nm), 0.0))
+    fm.modes = [Mode(excl, pr, "events", ()) for excl, pr in modes.items()]
+    return fm
+
+
 def design_matrix(g, constellation, kept):
     """(H, rows): H = [G, B] over the kept rows, one clock column per constellation that still
     has a kept source (the clocks of the others are literally removed)."""
@@ -254,9 +352,12 @@ def solve_pl(prior_fault_free, sigma0, bias0, priors, sigmas, offsets, rhs):
 
 
 def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                budget, valid=None, max_order=3, singular_rtol=SINGULAR_RTOL):
+                                budget, valid=None, max_order=3, singular_rtol=SINGULAR_RTOL,
+                                fault_modes="grouped"):
     """Seed 004 eqs. (8)-(16) for ONE geometry; arguments as ``araim.protection_levels`` without
-    batch axes: g (L, 3), constellation/var_int/var_acc/b_nom/p_sat/valid (L,), p_const (C,)."""
+    batch axes: g (L, 3), constellation/var_int/var_acc/b_nom/p_sat/valid (L,), p_const (C,).
+    ``fault_modes``: "grouped" (``fault_mode_set``) or one of ``EVENT_RULES``
+    (``event_fault_mode_set``, max_order at most 2)."""
     g = np.asarray(g, float)
     L = g.shape[0]
     valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
@@ -266,7 +367,11 @@ def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat
     b_nom = np.where(valid, np.asarray(b_nom, float), 0.0)
     g = np.where(valid[:, None], g, 0.0)
 
-    fm = fault_mode_set(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
+    if fault_modes == "grouped":
+        fm = fault_mode_set(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
+    else:
+        fm = event_fault_mode_set(valid, constellation, p_sat, p_const, budget, fault_modes,
+                                  max_order)
     inf3 = np.full(3, np.inf)
 
     lo, hi = singular_rtol / BORDERLINE_FACTOR, singular_rtol * BORDERLINE_FACTOR
@@ -344,10 +449,11 @@ class Separation:
 
 
 def solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                  budget, residual, valid=None, max_order=3):
+                                  budget, residual, valid=None, max_order=3,
+                                  fault_modes="grouped"):
     """Eq. (13) for one geometry and residual vector y (L,): separations, tau and detection."""
     res = protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                      budget, valid, max_order)
+                                      budget, valid, max_order, fault_modes=fault_modes)
     y = np.asarray(residual, float)
     if valid is not None:
         y = np.where(np.asarray(valid, bool), y, 0.0)
@@ -386,14 +492,15 @@ def weighted_sse(g, constellation, kept, var_int, y):
 
 
 def detect_and_exclude_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                 budget, residual, valid=None, max_order=3):
+                                 budget, residual, valid=None, max_order=3,
+                                 fault_modes="grouped"):
     """Detection and exclusion for one geometry: re-test every monitorable mode's subset with the
     same residual; among the subsets that pass with status OK keep the smallest weighted SSE."""
     L = np.asarray(g).shape[0]
     valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
     y = np.where(valid, np.asarray(residual, float), 0.0)
     sep = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
-                                        p_const, budget, y, valid, max_order)
+                                        p_const, budget, y, valid, max_order, fault_modes)
     if not sep.detected:
         return FDE(False, np.zeros(L, bool), sep.result, sep.result.status, [])
     g_clean = np.where(valid[:, None], np.asarray(g, float), 0.0)
@@ -403,7 +510,8 @@ def detect_and_exclude_reference(g, constellation, var_int, var_acc, b_nom, p_sa
         sub_valid = valid.copy()
         sub_valid[list(excl)] = False
         sub = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
-                                            p_const, budget, y, sub_valid, max_order)
+                                            p_const, budget, y, sub_valid, max_order,
+                                            fault_modes)
         ok = sub.result.status == OK and not sub.detected
         sse = weighted_sse(g_clean, np.asarray(constellation, int), sub_valid, vi, y) if ok \
             else np.inf

@@ -37,6 +37,7 @@ from oaraim import data, geometry
 from oaraim.araim import availability as av
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import _protection_levels, required_order
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
 from oaraim.geometry.sky import look_angles, resolve_source
@@ -48,6 +49,7 @@ from oaraim.studies.base import (
     SweepStudy,
     check_bpp_annulus,
     count,
+    fault_modes_param,
     in_range,
     keyword_or_file,
     non_negative,
@@ -277,10 +279,10 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 
 
 @functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
-                                                "budget", "requirements"))
+                                                "budget", "requirements", "fault_modes"))
 def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
                gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-               requirements):
+               requirements, fault_modes="add-v4.2"):
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
@@ -324,7 +326,8 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
         g = jnp.concatenate([g, geometry.geometry_rows(s_az, jnp.where(s_valid, s_el, 0.0))],
                             -2)
     r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                           x["p_sat"], p_const, x["valid"], budget=budget, max_order=max_order)
+                           x["p_sat"], p_const, x["valid"], budget=budget, max_order=max_order,
+                           fault_modes=fault_mode_rule(fault_modes))
     ok = av.available(r.hpl_m, r.vpl_m, r.emt_m, r.sigma_acc_u_m, r.status, requirements)
     return {"hpl_m": r.hpl_m, "vpl_m": r.vpl_m, "emt_m": r.emt_m,
             "sigma_acc_m": r.sigma_acc_u_m, "status": r.status.astype(jnp.int8),
@@ -358,7 +361,7 @@ class MapRow:
         lay = layout(p)
         self.static = dict(n_slots=lay["n_slots"], n_sops=lay["n_sops"], bpp=lay["bpp"],
                            max_order=lay["max_order"], budget=lay["level"].budget,
-                           requirements=lay["requirements"])
+                           requirements=lay["requirements"], fault_modes=p["fault_modes"])
         self.p_const = jnp.asarray(lay["p_const"])
         self.towers = None
         if p["towers"] != "none":
@@ -405,7 +408,7 @@ def _layout(key):
     p_sat = [max(p["p_sat_gps"], p["p_sat_gal"])] * n_slots + [p["p_s_sop"]] * n_sops
     max_order = int(required_order(
         jnp.ones((1, L), bool), jnp.asarray([labels]), jnp.asarray([p_sat]),
-        jnp.asarray([p_const]), level.budget.p_thresh, cap=2))
+        jnp.asarray([p_const]), level.budget, cap=2, fault_modes=p["fault_modes"]))
     target = level.target if p["target"] == "preset" else float(p["target"])
     return {"level": level, "requirements": req, "target": target, "n_slots": n_slots,
             "n_sops": n_sops, "bpp": bpp, "p_const": np.asarray(p_const), "max_order": max_order,
@@ -533,6 +536,8 @@ class AvailabilityMap(SweepStudy):
                           "Table I)"),
         "coastlines": _p("none", parse_geojson, "GeoJSON coastlines drawn on the maps "
                          "(optional; e.g. Natural Earth 110m coastline)"),
+        "fault_modes": fault_modes_param("add-v4.2", "the current ADD (MAAST 2024 "
+                                         "determine_subsets_v5)"),
         "chunk": _p(16384, count(1024), "realizations per task and chunk file (not a result)"),
     }
 

@@ -242,3 +242,13 @@ class SweepStudy(Study):
             result, _ = run_sweep_study(self, params, realizations, seed, tmp, progress=False)
         return result
 
+
+
+def fault_modes_param(default, why):
+    """The ``fault_modes`` parameter of a study that runs the MHSS receiver: the convention
+    (``araim.FaultModeRule``, docs/conformance.md), with the study's reason for its default."""
+    from oaraim.araim.fault_modes import CONVENTIONS
+
+    return Param(default, parse_choice(*CONVENTIONS),
+                 f"fault-mode convention: {', '.join(CONVENTIONS)} (docs/conformance.md); "
+                 f"default {default}: {why}")

@@ -114,7 +114,7 @@ class RiskCell:
         self.X = 2 * self.x.size  # x A_det, then x A_PL (ir.risk_table)
         self.G = int(params["geometries"])
         self.max_order = c.order_for(table["az_rad"].shape[1], self.n_sops, params["p_s_sop"],
-                                     params["p_const_sop"])
+                                     params["p_const_sop"], params["fault_modes"])
         self.cache = {}
 
     def table(self, g, key):
@@ -124,7 +124,7 @@ class RiskCell:
         epoch, rows, x, p_const = geometry_inputs(kg, self.jtable, self.n_sops, self.p)
         maps = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"],
                                x["b_nom"], x["p_sat"], p_const, c.BUDGET, valid=x["valid"],
-                               max_order=self.max_order)
+                               max_order=self.max_order, fault_modes=self.p["fault_modes"])
         t = ir.risk_table(maps, jax.random.fold_in(kg, 2), self.x,
                           n_samples=self.p["samples"], ce_samples=self.p["ce_samples"],
                           ce_rounds=self.p["ce_rounds"], nominal_bias=self.p["nominal_bias"])
@@ -205,7 +205,8 @@ def geometry_zero_maps(params, key, n_sops, budget, max_order):
     kg = jax.random.fold_in(key, 0)
     epoch, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
     m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                        x["p_sat"], p_const, budget, valid=x["valid"], max_order=max_order)
+                        x["p_sat"], p_const, budget, valid=x["valid"], max_order=max_order,
+                        fault_modes=params["fault_modes"])
     return kg, x, m, epoch
 
 
@@ -245,7 +246,8 @@ def sop_ramps(params, key, n_sops):
     """Ramps on every tower of the first geometry of a cell with SOPs: (n_sops, 2, epochs)
     per-epoch P(missed-detection HMI), the union bound per tower and direction, the epochs."""
     first = n_slots(params)
-    order = c.order_for(first, n_sops, params["p_s_sop"], params["p_const_sop"])
+    order = c.order_for(first, n_sops, params["p_s_sop"], params["p_const_sop"],
+                        params["fault_modes"])
     kg, _, m, _ = geometry_zero_maps(params, key, n_sops, c.BUDGET, order)
     p, union, t, prior = [], [], None, []
     for j in range(n_sops):

@@ -51,6 +51,7 @@ from oaraim.studies.base import (
     Study,
     StudyResult,
     count,
+    fault_modes_param,
     in_range,
     keyword_or_file,
     non_negative,
@@ -260,7 +261,7 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
             c["var_acc_m2"][idx], v_c[idx], truth, correction_m=c["correction_m"][idx],
             p_const=(params["p_const"],), p_sat=params["p_sat"], b_nom_m=params["b_nom_m"],
             budget=araim.BUDGET_SEED004_TABLE_I, p_fa=params["p_fa"], p_md=params["p_md"],
-            x0_m=x0[idx], max_order=max_order)
+            x0_m=x0[idx], max_order=max_order, fault_modes=params["fault_modes"])
         sl = slice(start, start + n)
         f = lambda a, n=n: np.asarray(a)[:n]  # noqa: E731
         vals = {
@@ -322,6 +323,7 @@ class RinexReplay(Study):
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagram "
                        "(LPV-200)", "m"),
         "val_m": Param(35.0, positive, "vertical alert limit (LPV-200)", "m"),
+        "fault_modes": fault_modes_param("add-v4.2", "a GNSS receiver follows the current ADD"),
         "chunk": Param(BLOCK_EPOCHS, count(1), "accepted for the common study interface and "
                        f"ignored: the replay always runs in blocks of {BLOCK_EPOCHS} epochs "
                        "(one compilation, results independent of any chunking)"),
@@ -348,7 +350,8 @@ class RinexReplay(Study):
         p_sat = np.full(inp["valid"].shape, params["p_sat"])
         max_order = required_order(inp["valid"], np.zeros(inp["valid"].shape, np.int32), p_sat,
                                    np.full((n_t, 1), params["p_const"]),
-                                   araim.BUDGET_SEED004_TABLE_I.p_thresh)
+                                   araim.BUDGET_SEED004_TABLE_I,
+                                   fault_modes=params["fault_modes"])
         out = replay_blocks(inp, truth, params, max_order, progress)
         return self._result(params, obs, nav_path, truth, truth_src, inp, out, max_order)
 

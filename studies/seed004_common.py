@@ -38,6 +38,7 @@ import numpy as np
 from oaraim import geometry
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import _protection_levels, required_order
 from oaraim.geometry import gpstime
 from oaraim.studies import seed001_fig5 as fig5
@@ -45,6 +46,7 @@ from oaraim.studies.base import (
     Param,
     check_bpp_annulus,
     count,
+    fault_modes_param,
     in_range,
     non_negative,
     positive,
@@ -64,6 +66,9 @@ P_CONST_GPS = 1e-8
 #: Table I, SOP constellation
 P_CONST_SOP = 1e-4
 BUDGET = BUDGET_SEED004_TABLE_I
+#: seed 004's own rule (eq. 8 with grouped multiple faults): P_s^S reaches 0.1 on the Fig. 4
+#: grid, where the ADD's enumeration of every pair, triple, ... of SOPs explodes
+FAULT_MODES = "grouped"
 #: DESIGN.md: seed 004 Fig. 4 grid
 SIGMA_GRID_M = (0.5, *[float(s) for s in range(1, 26)])
 P_S_GRID = tuple(float(f"{m}e{e}") for e in range(-7, -1) for m in (1, 3)) + (0.1,)
@@ -90,6 +95,8 @@ def common_params():
         "h_max_m": Param(50.0, in_range(-1000.0, 1000.0),
                          "tower height above the receiver, max (silent)", "m"),
         "p_const_sop": Param(P_CONST_SOP, probability, "SOP constellation fault (Table I)"),
+        "fault_modes": fault_modes_param(FAULT_MODES, "seed 004 eq. 8, P_s^S up to 0.1 on the "
+                                         "Fig. 4 grid (max_order 2 for the ADD rules)"),
         "chunk": Param(5120, count(1024), "realizations per task and chunk file (not a result)"),
     }
 
@@ -166,14 +173,15 @@ def concat_inputs(a, b):
     return {k: jnp.concatenate([a[k], b[k]], -1) for k in a}
 
 
-def mhss(g, x, p_const, max_order):
+def mhss(g, x, p_const, max_order, fault_modes=FAULT_MODES):
     """HPL, VPL and status of a batch (B, L) through the private kernel (we are inside jit)."""
     r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                           x["p_sat"], p_const, x["valid"], budget=BUDGET, max_order=max_order)
+                           x["p_sat"], p_const, x["valid"], budget=BUDGET, max_order=max_order,
+                           fault_modes=fault_mode_rule(fault_modes))
     return r.hpl_m, r.vpl_m, r.status, r.order, r.n_modes
 
 
-def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop):
+def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop, fault_modes=FAULT_MODES):
     """Static max_order for a cell: the order the P_thresh rule needs with every GPS slot in
     view (the most GPS faults, so the worst case); the kernel still picks each geometry's own
     order up to it."""
@@ -183,4 +191,4 @@ def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop):
     p_sat = np.array([[P_S_GPS] * n_gps_slots + [p_s_sop] * n_sops])
     p_const = np.array([[P_CONST_GPS, p_const_sop]])
     return int(required_order(jnp.asarray(valid), jnp.asarray(const), jnp.asarray(p_sat),
-                              jnp.asarray(p_const), BUDGET.p_thresh, cap=2))
+                              jnp.asarray(p_const), BUDGET, cap=2, fault_modes=fault_modes))

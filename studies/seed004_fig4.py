@@ -42,9 +42,9 @@ from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, pos
 TOL_M = 2e-3
 
 
-@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order"))
+@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
 def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
-               d_min_m, d_max_m, h_min_m, h_max_m, max_order):
+               d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes=c.FAULT_MODES):
     """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
     def draw(k):
         _, az, el, v = c.draw_gps(k, t_az, t_el, t_valid)
@@ -56,16 +56,16 @@ def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_co
                                                           1))
     g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
     hpl, vpl, status, order, _ = c.mhss(g, x, jnp.array([c.P_CONST_GPS, p_const_sop]),
-                                        max_order)
+                                        max_order, fault_modes)
     return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
 
 
-@jit_kernel
-def gps_kernel(keys, t_az, t_el, t_valid):
+@functools.partial(jit_kernel, static_argnames=("fault_modes",))
+def gps_kernel(keys, t_az, t_el, t_valid, fault_modes=c.FAULT_MODES):
     """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
     epoch, az, el, v = jax.vmap(lambda k: c.draw_gps(k, t_az, t_el, t_valid))(keys)
     hpl, vpl, status, _, _ = c.mhss(geometry.geometry_rows(az, el), c.gps_inputs(el, v),
-                                    jnp.array([c.P_CONST_GPS]), 1)
+                                    jnp.array([c.P_CONST_GPS]), 1, fault_modes)
     return {"hpl_gps_m": hpl, "vpl_gps_m": vpl, "status_gps": status, "epoch": epoch,
             "n_gps": jnp.sum(v, -1)}
 
@@ -76,12 +76,12 @@ _GPS_CACHE = collections.OrderedDict()
 _GPS_CACHE_SIZE = 64
 
 
-def gps_only(keys, table, table_id):
+def gps_only(keys, table, table_id, fault_modes=c.FAULT_MODES):
     digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
                              digest_size=16).hexdigest()
-    k = (table_id, digest)
+    k = (table_id, digest, fault_modes)
     if k not in _GPS_CACHE:
-        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"])
+        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes)
         _GPS_CACHE[k] = {name: np.asarray(v) for name, v in out.items()}
         while len(_GPS_CACHE) > _GPS_CACHE_SIZE:
             _GPS_CACHE.popitem(last=False)
@@ -123,13 +123,15 @@ class Fig4Cell:
         self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
                      params["p_const_sop"], params["d_min_m"], params["d_max_m"],
                      params["h_min_m"], params["h_max_m"])
+        self.fault_modes = params.get("fault_modes", c.FAULT_MODES)
         self.max_order = c.order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
-                                     params["p_const_sop"])
+                                     params["p_const_sop"], self.fault_modes)
 
     def __call__(self, keys):
-        gps = gps_only(keys, self.jtable, self.table_id)
+        gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
         sop = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
-                         self.jtable["valid"], self.n_sops, *self.args, self.max_order)
+                         self.jtable["valid"], self.n_sops, *self.args, self.max_order,
+                         self.fault_modes)
         return compare(gps, sop)
 
 

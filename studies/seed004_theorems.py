@@ -26,6 +26,8 @@ Checks per realization, old system (GPS) vs new (GPS + SOP), same compiled shape
   Theorem 2: HPL and VPL do not decrease beyond 2 x the 1e-3 m solver tolerance (DESIGN.md).
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,11 +36,12 @@ import xarray as xr
 from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.fde import _separation
 from oaraim.araim.status import Status
 from oaraim.mc.sweep import Count, Max, Mean, Min
 from oaraim.studies import seed004_common as c
-from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count
+from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, fault_modes_param
 
 RAISE_TOL_M = 2e-3
 #: "unchanged" separations: both sides are S y from different factorizations of the same
@@ -84,16 +87,17 @@ def draw(key, n_gps):
     return common, valid_old, valid_new, big
 
 
-def _sep(x, valid):
+def _sep(x, valid, fault_modes):
     return _separation(x["g"], x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                       x["p_sat"], x["p_const"], valid, x["y"], budget=c.BUDGET, max_order=1)
+                       x["p_sat"], x["p_const"], valid, x["y"], budget=c.BUDGET, max_order=1,
+                       fault_modes=fault_mode_rule(fault_modes))
 
 
-@jit_kernel
-def theorem_kernel(keys, n_gps):
+@functools.partial(jit_kernel, static_argnames=("fault_modes",))
+def theorem_kernel(keys, n_gps, fault_modes=c.FAULT_MODES):
     """Per realization flags and magnitudes; ``n_gps`` is traced (one compilation)."""
     x, v_old, v_new, big = jax.vmap(lambda k: draw(k, n_gps))(keys)
-    so, sn = _sep(x, v_old), _sep(x, v_new)
+    so, sn = _sep(x, v_old, fault_modes), _sep(x, v_new, fault_modes)
     ok_status = ((so.pl.status == Status.OK) & (sn.pl.status == Status.OK)
                  & (so.pl.order == 1) & (sn.pl.order == 1)
                  & (sn.pl.n_modes == so.pl.n_modes + 1))
@@ -136,9 +140,10 @@ def theorem_kernel(keys, n_gps):
 class TheoremCell:
     def __init__(self, params, coords):
         self.n_gps = int(coords["n_gps"])
+        self.fault_modes = params.get("fault_modes", c.FAULT_MODES)
 
     def __call__(self, keys):
-        return theorem_kernel(keys, self.n_gps)
+        return theorem_kernel(keys, self.n_gps, self.fault_modes)
 
 
 class Theorems(SweepStudy):
@@ -154,6 +159,8 @@ class Theorems(SweepStudy):
     params = {
         "n_gps": Param(tuple(range(5, 13)), axis(count(5, GPS_SLOTS)),
                        "GPS satellites of the old system (M_s >= 3 + M_const = 4)"),
+        "fault_modes": fault_modes_param(c.FAULT_MODES, "the theorems are statements about "
+                                         "seed 004's rule (eq. 8), order 1"),
         "chunk": Param(4096, count(1024), "realizations per task and chunk file (not a result)"),
     }
 

@@ -61,6 +61,7 @@ from oaraim.studies.base import (
     Study,
     StudyResult,
     count,
+    fault_modes_param,
     in_range,
     non_negative,
     parse_recording,
@@ -212,6 +213,8 @@ class Seed004Uav(Study):
                            "view the whole flight, else the lowest such PRN)"),
         "fault_onset_s": Param(100.0, in_range(0.0, 1e4), "onset of the Fig. 7 ramp", "s"),
         "fault_ramp_mps": Param(0.5, positive, "slope of the Fig. 7 bias ramp", "m/s"),
+        "fault_modes": fault_modes_param("grouped", "seed 004's rule (eq. 8), as the other seed "
+                                         "004 studies; P_s^S = 1e-4 (VII)"),
         "exclusion": Param(True, parse_bool, "GPS + all SOPs also with detect_and_exclude "
                            "(~2 min per 2880 epochs on 2 CPU cores)"),
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagrams "
@@ -223,6 +226,7 @@ class Seed004Uav(Study):
     }
 
     def run(self, params, realizations, seed, progress):
+        self.fault_modes = params["fault_modes"]
         geom, pr, corr, desc = synthesize(params, seed)
         n_t = min(int(realizations), geom.t_s.size)
         sl = slice(0, n_t)
@@ -277,7 +281,7 @@ class Seed004Uav(Study):
         mo = int(required_order(jnp.asarray(used), jnp.asarray(np.broadcast_to(cons, used.shape)),
                                 jnp.asarray(np.broadcast_to(p_sat, used.shape)),
                                 jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
-                                BUDGET_SEED004_TABLE_I.p_thresh))
+                                BUDGET_SEED004_TABLE_I, fault_modes=self.fault_modes))
         hpl = np.full(n_t, np.inf)
         vpl = np.full(n_t, np.inf)
         for start, idx, n in _blocks(n_t, BLOCK):
@@ -286,7 +290,7 @@ class Seed004Uav(Study):
                 np.broadcast_to(b_nom, (idx.size, b_nom.size)),
                 np.broadcast_to(p_sat, (idx.size, p_sat.size)),
                 np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
-                valid=used[idx], max_order=mo)
+                valid=used[idx], max_order=mo, fault_modes=self.fault_modes)
             hpl[start:start + n] = np.asarray(pl.hpl_m)[:n]
             vpl[start:start + n] = np.asarray(pl.vpl_m)[:n]
         ok = np.asarray(r.wnls.status) == 0
@@ -299,7 +303,7 @@ class Seed004Uav(Study):
         mo = int(required_order(jnp.asarray(use), jnp.asarray(np.broadcast_to(cons, use.shape)),
                                 jnp.asarray(np.broadcast_to(p_sat, use.shape)),
                                 jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
-                                BUDGET_SEED004_TABLE_I.p_thresh))
+                                BUDGET_SEED004_TABLE_I, fault_modes=self.fault_modes))
         out = {k: np.zeros(n_t) for k in ("hpl", "hpe", "hpl_aiv", "tau")}
         out["detected"] = np.zeros(n_t, bool)
         out["n_excluded"] = np.zeros(n_t, np.int16)
@@ -308,7 +312,7 @@ class Seed004Uav(Study):
                                 use[idx], geom.truth_m[idx], correction_m=corr[idx],
                                 constellation=np.broadcast_to(cons, (idx.size, cons.size)),
                                 p_const=p_const, p_sat=p_sat, b_nom_m=b_nom, x0_m=x0[idx],
-                                max_order=mo, monitors=("mhss",))
+                                max_order=mo, monitors=("mhss",), fault_modes=self.fault_modes)
             s = slice(start, start + n)
             out["hpl"][s] = np.asarray(r.mhss.hpl_m)[:n]
             out["hpe"][s] = np.asarray(r.mhss.hpe_m)[:n]
@@ -351,7 +355,7 @@ class Seed004Uav(Study):
                                     jnp.asarray(np.broadcast_to(cons, used.shape)),
                                     jnp.asarray(np.broadcast_to(p_sat, used.shape)),
                                     jnp.asarray(np.broadcast_to(p_const, (n_t, p_const.size))),
-                                    BUDGET_SEED004_TABLE_I.p_thresh))
+                                    BUDGET_SEED004_TABLE_I, fault_modes=self.fault_modes))
             sep = np.zeros((n_t, 3))
             thr = np.zeros((n_t, 3))
             tau_mode = np.zeros(n_t)
@@ -372,7 +376,8 @@ class Seed004Uav(Study):
                     var_acc[idx], np.broadcast_to(b_nom, (idx.size, b_nom.size)),
                     np.broadcast_to(p_sat, (idx.size, p_sat.size)),
                     np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
-                    resid[idx], valid=used[idx], max_order=mo) for resid in (y, unit)]
+                    resid[idx], valid=used[idx], max_order=mo, fault_modes=self.fault_modes)
+                    for resid in (y, unit)]
                 per_m = np.abs(np.asarray(s1.separation_m)[:n])
                 thr_all = np.asarray(s1.threshold_m)[:n]
                 live = (per_m > 0) & (thr_all > 0) & np.asarray(s1.monitored)[:n][..., None]

@@ -8,6 +8,7 @@ float64: rounding ~1e-15).
 """
 
 import itertools
+from functools import partial
 
 import jax
 import numpy as np
@@ -21,6 +22,11 @@ from oaraim.araim import Status
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_modes as _fault_modes_eager
 from tests.test_mhss import random_cases
+
+# these tests check the grouped convention (seed 004's SOP studies) against the grouped
+# oracle; the ADD conventions are tested in test_conformance.py
+protection_levels = partial(araim.protection_levels, fault_modes="grouped")
+solution_separation = partial(araim.solution_separation, fault_modes="grouped")
 
 P_THRESH = 6e-8  # Table I
 #: jitted once per shape: eager dispatch of the mode template is slower than compiling it
@@ -207,7 +213,7 @@ def test_public_api_probabilities_close():
     (computed independently) = 1 within 1e-12 on every geometry with status OK or 5."""
     n = 128  # the shape of test_fde.py's separation test: one compilation for both
     case, _ = random_cases(20261125, n)
-    sep = araim.solution_separation(
+    sep = solution_separation(
         case["g"], case["constellation"], case["var_int"], case["var_acc"], case["b_nom"],
         case["p_sat"], case["p_const"], araim.BUDGET_SEED004_TABLE_I, np.zeros((n, 28)),
         valid=case["valid"], max_order=3)
@@ -256,7 +262,7 @@ def test_benchmark_configuration_has_15_modes():
     args, valid = _gps9_sops(4, 1e-4)
     fm = _np(fault_modes(valid, args[1], args[5], args[6], P_THRESH, 3))
     assert int(fm["order"]) == 1 and int(fm["live"].sum()) == 15
-    res = araim.protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
+    res = protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
     assert int(res.order) == 1 and int(res.n_modes) == 15 and int(res.status) == Status.OK
     o = ref.protection_levels_reference(*args, araim.BUDGET_SEED004_TABLE_I, valid, 3)
     assert o.n_modes == 15 and not o.singular
@@ -271,7 +277,7 @@ def test_high_sop_fault_probability_needs_order_2():
     args, valid = _gps9_sops(8, 0.1)
     fm = _np(fault_modes(valid, args[1], args[5], args[6], P_THRESH, 3))
     assert int(fm["order"]) == 2 and int(fm["live"].sum()) == 37
-    res = araim.protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
+    res = protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
     assert int(res.order) == 2 and int(res.n_modes) == 36
     o = ref.protection_levels_reference(*args, araim.BUDGET_SEED004_TABLE_I, valid, 3)
     assert o.order == 2 and len(o.fault_modes.modes) == 37 and o.n_modes == 36

@@ -14,6 +14,8 @@ comparison, so the handful of comparisons here fail by chance with probability <
 Compiled shapes: L = 18, C = 2 (the FDE cases), order 1.
 """
 
+from functools import partial
+
 import jax
 import numpy as np
 import pytest
@@ -24,6 +26,11 @@ from oaraim.araim import Status
 from oaraim.araim import integrity_risk as ir
 from tests.test_fde import L_GPS, L, _args, fde_cases
 
+# these tests check the grouped convention (seed 004's SOP studies) against the grouped
+# oracle; the ADD conventions are tested in test_conformance.py
+detect_and_exclude = partial(araim.detect_and_exclude, fault_modes="grouped")
+monitor_maps = partial(ir.monitor_maps, fault_modes="grouped")
+
 #: a deliberately weak budget: fault-free vertical risk ~1e-3, resolvable by crude Monte Carlo
 WEAK = araim.IntegrityBudget(phmi_v=2e-3, phmi_h=2e-3, p_fa_v=1e-3, p_fa_h=1e-3, p_thresh=6e-8)
 N_GEOM = 6
@@ -32,7 +39,7 @@ N_GEOM = 6
 def _maps(c, budget):
     """One geometry per call, stacked: the (L, 3) shapes the study's kernel compiles (L = 18 is
     12 GPS slots + 6 SOPs there, see tests/test_studies.py SMALL), so the suite compiles once."""
-    one = [ir.monitor_maps(c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i],
+    one = [monitor_maps(c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i],
                            c["b_nom"][i], c["p_sat"][i], c["p_const"][i], budget,
                            valid=c["valid"][i], max_order=1) for i in range(len(c["g"]))]
     return jax.tree.map(lambda *a: np.stack(a), *one)
@@ -64,7 +71,7 @@ def test_maps_reproduce_detect_and_exclude(cases):
     out = jax.vmap(lambda m, r: ir.evaluate(m, r[None]))(_pick(maps, gi), y)
     out = jax.tree.map(lambda a: np.asarray(a)[:, 0], out)
     bc = {k: v[gi] for k, v in c.items()}
-    fde = araim.detect_and_exclude(*_args(bc, y), valid=bc["valid"], max_order=1)
+    fde = detect_and_exclude(*_args(bc, y), valid=bc["valid"], max_order=1)
     det = np.asarray(fde.detected)
     mode = np.asarray(fde.exclusion_mode)
     pos = np.asarray(fde.position_m)
@@ -234,4 +241,4 @@ def test_bad_options_are_named(cases):
     with pytest.raises(ValueError, match="direction"):
         ir.scenario_estimate(m, ir.FAULT_FREE, -1, -1, 2, 0.0, jax.random.key(0))
     with pytest.raises(ValueError, match="budget"):
-        ir.monitor_maps(np.zeros((5, 3)), 0, 1.0, 1.0, 0.0, 1e-5, [1e-8], None)
+        monitor_maps(np.zeros((5, 3)), 0, 1.0, 1.0, 0.0, 1e-5, [1e-8], None)

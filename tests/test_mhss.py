@@ -13,6 +13,8 @@ Compiled shapes are kept few (DESIGN.md): every random batch is padded to L = 28
 the hand cases to L = 8, C = 2.
 """
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -23,6 +25,10 @@ from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.araim.error_models import gnss_variances, sop_variances
+
+# these tests check the grouped convention (seed 004's SOP studies) against the grouped
+# oracle; the ADD conventions are tested in test_conformance.py
+protection_levels = partial(araim.protection_levels, fault_modes="grouped")
 
 L_GPS, L_GAL, L_SOP = 12, 8, 8
 L = L_GPS + L_GAL + L_SOP
@@ -121,7 +127,7 @@ def random_cases(seed, n):
 
 
 def run_jax(case, bud=None, max_order=3, sl=slice(None)):
-    res = araim.protection_levels(
+    res = protection_levels(
         case["g"][sl], case["constellation"][sl], case["var_int"][sl], case["var_acc"][sl],
         case["b_nom"][sl], case["p_sat"][sl], case["p_const"][sl], bud or budget(),
         valid=case["valid"][sl], max_order=max_order)
@@ -338,7 +344,7 @@ def test_fault_free_prior_pl_is_closed_form():
     g, const, var, bnom, p, valid = pad(5, ring_zenith_rows(), np.zeros(5, int), np.ones(5),
                                         np.full(5, b), np.zeros(5))
     bud = budget()
-    res = araim.protection_levels(g, const, var, var, bnom, p, np.zeros(2), bud, valid=valid,
+    res = protection_levels(g, const, var, var, bnom, p, np.zeros(2), bud, valid=valid,
                                   max_order=1)
     assert int(res.status) == Status.OK
     assert float(res.p_not_monitored) == 0.0
@@ -368,7 +374,7 @@ def test_lone_sop_mode_closed_form():
                                            np.r_[np.ones(5), 9.0], np.zeros(6),
                                            np.r_[np.zeros(5), p])
     bud = budget()
-    res = araim.protection_levels(g, const, var, var, bnom, psat, np.zeros(2), bud,
+    res = protection_levels(g, const, var, var, bnom, psat, np.zeros(2), bud,
                                   valid=valid, max_order=1)
     assert int(res.status) == Status.OK
     sig_e, sig_u = 1.0 / np.sqrt(2.0 * c**2), np.sqrt(5.0 / (4.0 * (1.0 - s) ** 2))
@@ -398,7 +404,7 @@ def test_one_weighted_mode_pl_solves_the_equation():
     g, const, var, bnom, psat, valid = pad(7, g7, np.r_[np.zeros(5, int), 1, 1],
                                            np.r_[np.ones(5), v, v], np.zeros(7), np.zeros(7))
     bud = budget()
-    res = araim.protection_levels(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
+    res = protection_levels(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
                                   valid=valid, max_order=1)
     assert int(res.status) == Status.OK
     assert int(res.n_modes) == 7
@@ -516,15 +522,15 @@ def test_batch_shape_invariance():
     cases below, OK and failed ones mixed)."""
     cases = [_gps_only(8), _gps_only(4), _gps_only(7), _gps_only(8, p_const_gps=1e-6)]
     stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
-    flat = araim.protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
-    shaped = araim.protection_levels(*(a.reshape((2, 2) + a.shape[1:]) for a in stacked[:-1]),
+    flat = protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
+    shaped = protection_levels(*(a.reshape((2, 2) + a.shape[1:]) for a in stacked[:-1]),
                                      budget(), valid=stacked[-1].reshape(2, 2, -1), max_order=1)
     for k in flat._fields:
         a, b = np.asarray(getattr(flat, k)), np.asarray(getattr(shaped, k))
         assert b.shape[:2] == (2, 2), k
         np.testing.assert_array_equal(b.reshape(a.shape), a, err_msg=k)
     for i, c in enumerate(cases):
-        one = araim.protection_levels(*c[:-1], budget(), valid=c[-1], max_order=1)
+        one = protection_levels(*c[:-1], budget(), valid=c[-1], max_order=1)
         for k in flat._fields:
             np.testing.assert_allclose(np.asarray(getattr(one, k)),
                                        np.asarray(getattr(flat, k))[i], rtol=1e-12, err_msg=k)
@@ -536,7 +542,7 @@ def test_broadcast_arguments(random_batch):
     full = dict(case)
     full["b_nom"] = np.full_like(case["b_nom"], 0.75)
     a = run_jax(full)
-    res = araim.protection_levels(case["g"], case["constellation"], case["var_int"],
+    res = protection_levels(case["g"], case["constellation"], case["var_int"],
                                   case["var_acc"], 0.75, case["p_sat"], P_CONST, budget(),
                                   valid=case["valid"], max_order=3)
     for k in a:
@@ -570,10 +576,10 @@ def _assert_failed(res, status):
 def test_too_few_sources_is_inf_with_status_1():
     """4 GPS satellites: 3 + 1 states + 1 redundancy needed = 5 sources; also 0 sources."""
     args = _gps_only(4)
-    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+    _assert_failed(protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
                    Status.TOO_FEW_SOURCES)
     none = np.zeros(8, bool)
-    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=none, max_order=1),
+    _assert_failed(protection_levels(*args[:-1], budget(), valid=none, max_order=1),
                    Status.TOO_FEW_SOURCES)
     o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
     assert o.status == ref.TOO_FEW_SOURCES and o.hpl_m == np.inf
@@ -582,7 +588,7 @@ def test_too_few_sources_is_inf_with_status_1():
 def test_singular_all_in_view_is_inf_with_status_2():
     """Six satellites all at 40 deg elevation: up and clock columns are collinear."""
     args = _gps_only(6, el_deg=40.0)
-    _assert_failed(araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+    _assert_failed(protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
                    Status.SINGULAR_GEOMETRY)
     o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
     assert o.status == ref.SINGULAR_GEOMETRY
@@ -592,7 +598,7 @@ def test_unmet_p_thresh_is_inf_with_status_5():
     """GPS only with P_const = 1e-6 > P_thresh: the whole-GPS mode is singular (nothing left),
     so P_nm >= 1e-6 > 6e-8: UNMONITORED_RISK, P_nm still reported."""
     args = _gps_only(8, p_const_gps=1e-6)
-    res = araim.protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1)
+    res = protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1)
     _assert_failed(res, Status.UNMONITORED_RISK)
     o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
     assert o.status == ref.UNMONITORED_RISK
@@ -605,11 +611,11 @@ def test_mixed_batch_failures_do_not_leak():
     status and the OK rows equal their single-geometry results."""
     cases = [_gps_only(8), _gps_only(4), _gps_only(6, el_deg=40.0), _gps_only(8, p_const_gps=1e-6)]
     stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
-    res = araim.protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
+    res = protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
     np.testing.assert_array_equal(np.asarray(res.status), [0, 1, 2, 5])
     for k in res._fields:
         assert not np.any(np.isnan(np.asarray(getattr(res, k), float))), k
-    one = araim.protection_levels(*cases[0][:-1], budget(), valid=cases[0][-1], max_order=1)
+    one = protection_levels(*cases[0][:-1], budget(), valid=cases[0][-1], max_order=1)
     assert float(res.hpl_m[0]) == pytest.approx(float(one.hpl_m), abs=1e-9)
     assert np.isinf(np.asarray(res.hpl_m[1:])).all()
 
@@ -617,10 +623,10 @@ def test_mixed_batch_failures_do_not_leak():
 def test_bad_input_is_rejected_with_the_field_name():
     args = list(_gps_only(8))
     with pytest.raises(ValueError, match="var_int"):
-        araim.protection_levels(args[0], args[1], -args[2], *args[3:-1], budget(),
+        protection_levels(args[0], args[1], -args[2], *args[3:-1], budget(),
                                 valid=args[-1], max_order=1)
     with pytest.raises(ValueError, match="p_sat"):
-        araim.protection_levels(*args[:5], args[5] + 1.5, args[6], budget(), valid=args[-1],
+        protection_levels(*args[:5], args[5] + 1.5, args[6], budget(), valid=args[-1],
                                 max_order=1)
 
 
@@ -645,12 +651,12 @@ def test_input_checks_see_valid_sources_only(name, value, match):
         base[k] = np.stack([base[k]] * 3)
     base["valid"][1, 5] = False
     prepare_inputs(*(base[k] for k in keys))  # the clean batch passes
-    clean = araim.protection_levels(*(base[k] for k in keys[:7]), budget(), base["valid"],
+    clean = protection_levels(*(base[k] for k in keys[:7]), budget(), base["valid"],
                                     max_order=1)
     padded = {k: v.copy() for k, v in base.items()}
     padded[name][1, 5] = value
     prepare_inputs(*(padded[k] for k in keys))  # at an invalid source: accepted
-    got = araim.protection_levels(*(padded[k] for k in keys[:7]), budget(), padded["valid"],
+    got = protection_levels(*(padded[k] for k in keys[:7]), budget(), padded["valid"],
                                   max_order=1)
     np.testing.assert_array_equal(np.asarray(got.hpl_m), np.asarray(clean.hpl_m))
     used = {k: v.copy() for k, v in base.items()}
@@ -659,7 +665,7 @@ def test_input_checks_see_valid_sources_only(name, value, match):
         prepare_inputs(*(used[k] for k in keys))
     for max_order in (1, None):  # in the kernel, and on the host before required_order
         with pytest.raises(ValueError, match=match):
-            araim.protection_levels(*(used[k] for k in keys[:7]), budget(), used["valid"],
+            protection_levels(*(used[k] for k in keys[:7]), budget(), used["valid"],
                                     max_order=max_order)
 
 
@@ -930,7 +936,7 @@ def test_bench_case_is_proved_by_the_taylor_step():
             static_argnames=("size",) + mhss._STATIC))
         mp.setattr(mhss, "_protection_levels_jit", mhss.jit_kernel(
             lambda *a, **k: mhss._protection_levels(*a, **k), static_argnames=mhss._STATIC))
-        res = araim.protection_levels(
+        res = protection_levels(
             x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
             x["p_sat"], x["p_const"], budget(), x["valid"], max_order=1)
     status = np.asarray(res.status)
@@ -963,20 +969,20 @@ def test_threaded_split_is_bit_identical_to_one_call():
     assert np.all(np.isfinite(np.asarray(one.hpl_m)))
     # inside a caller's jit the split is skipped (threads cannot share a trace): same bits
     part = args  # 7 chunks: split into 2 parts were it not traced
-    jitted = jax.jit(lambda *a: araim.protection_levels(*a[:7], budget, a[7], max_order=1,
+    jitted = jax.jit(lambda *a: protection_levels(*a[:7], budget, a[7], max_order=1,
                                                         threads=2).hpl_m)(*part)
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(one.hpl_m), rtol=1e-12)
     with pytest.raises(ValueError, match="threads"):
-        araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
+        protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
     # the public call: split over 2 threads with the kernel's input flags, same bits; a bad
     # value at a valid source of the second part is caught there and named by the host check
-    public = araim.protection_levels(*args[:7], budget, args[7], max_order=1, threads=2)
+    public = protection_levels(*args[:7], budget, args[7], max_order=1, threads=2)
     for name, a, b in zip(public._fields, public, one, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name
     bad = np.array(args[3])
     bad[6 * CHUNK + 3, 2] = -1.0
     with pytest.raises(ValueError, match="var_acc_m2"):
-        araim.protection_levels(*args[:3], bad, *args[4:7], budget, args[7], max_order=1,
+        protection_levels(*args[:3], bad, *args[4:7], budget, args[7], max_order=1,
                                 threads=2)
 
 

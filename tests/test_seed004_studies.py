@@ -5,6 +5,8 @@ CLI path; here: the studies compute what they claim (against the public MHSS API
 checkable helpers, and the paper's statements at reduced size.
 """
 
+from functools import partial
+
 import jax
 import numpy as np
 import pytest
@@ -13,6 +15,10 @@ from oaraim import araim, geometry, mc
 from oaraim.studies import seed004_common as c
 from oaraim.studies.registry import STUDIES
 from oaraim.studies.seed004_fig4 import Fig4Cell, largest_reducing_sigma, monotone_share
+
+# these tests check the grouped convention (seed 004's SOP studies) against the grouped
+# oracle; the ADD conventions are tested in test_conformance.py
+protection_levels = partial(araim.protection_levels, fault_modes="grouped")
 
 
 def test_receiver_is_orange_county():
@@ -69,11 +75,11 @@ def test_fig4_cell_matches_public_protection_levels(cell):
     az_s = np.stack([np.asarray(x.az_rad) for x in tw])
     el_s = np.stack([np.asarray(x.el_rad) for x in tw])
     vi, va = (np.asarray(x) for x in araim.error_models.gnss_variances(el, 1.0))
-    gps = araim.protection_levels(geometry.geometry_rows(az, el), np.zeros(az.shape, int), vi,
+    gps = protection_levels(geometry.geometry_rows(az, el), np.zeros(az.shape, int), vi,
                                   va, 0.75, 1e-5, [1e-8], araim.BUDGET_SEED004_TABLE_I,
                                   valid=valid)
     si, sa = araim.error_models.sop_variances(np.full(az_s.shape, 3.0))
-    both = araim.protection_levels(
+    both = protection_levels(
         geometry.geometry_rows(np.concatenate([az, az_s], -1), np.concatenate([el, el_s], -1)),
         np.concatenate([np.zeros(az.shape, int), np.ones(az_s.shape, int)], -1),
         np.concatenate([vi, si], -1), np.concatenate([va, sa], -1),
