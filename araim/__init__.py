@@ -9,8 +9,16 @@ if __name__ != "oaraim.araim":  # the source folder is importable from the check
                       "oaraim.araim (pip install -e .), which also enables JAX's float64 mode")
 
 from oaraim.araim import error_models
-from oaraim.araim.budget import BUDGET_LPV200, BUDGET_SEED004_TABLE_I, IntegrityBudget
+from oaraim.araim.budget import (
+    BUDGET_LPV200,
+    BUDGET_LPV200_MAAST,
+    BUDGET_SEED004_TABLE_I,
+    IntegrityBudget,
+    exposure_probability,
+)
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table, noncentrality
+from oaraim.araim.fault_modes import CONVENTIONS as FAULT_MODE_CONVENTIONS
+from oaraim.araim.fault_modes import FaultModeRule
 from oaraim.araim.fde import FDEResult, Separation, detect_and_exclude, solution_separation
 from oaraim.araim.mhss import MHSSResult, protection_levels
 from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slopes
@@ -19,13 +27,17 @@ from oaraim.araim.wnls import WNLSResult, wnls
 
 __all__ = [
     "BUDGET_LPV200",
+    "BUDGET_LPV200_MAAST",
     "BUDGET_SEED004_TABLE_I",
+    "FAULT_MODE_CONVENTIONS",
     "FDEResult",
+    "FaultModeRule",
     "IntegrityBudget",
     "MHSSResult",
     "Separation",
     "detect_and_exclude",
     "error_models",
+    "exposure_probability",
     "protection_levels",
     "solution_separation",
     "SlopeHPL",

@@ -20,6 +20,8 @@ needs the six numbers. Presets:
 
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
 from oaraim.araim.validate import check_probability
 
 
@@ -32,6 +34,10 @@ class IntegrityBudget:
       p_fa_v, p_fa_h: false-alarm budget of the vertical and horizontal tests (eq. 12).
       p_thresh: bound on the probability of unmonitored fault modes (eq. 8).
       p_emt: fault modes with prior >= p_emt enter the effective monitor threshold (ADD).
+      n_es_int, n_es_cont: numbers of effective samples over the exposure (ADD v4.2; MAAST's
+        ``N_es_int``, ``N_es_cont``; its LPV-200 preset uses 25 and 25): the right-hand sides
+        of the PL equations are divided by ``n_es_int`` after the P_NM scaling, the false-alert
+        budgets of the thresholds by ``n_es_cont``. 1 and 1 (the default): off.
     """
 
     phmi_v: float
@@ -40,9 +46,17 @@ class IntegrityBudget:
     p_fa_h: float
     p_thresh: float
     p_emt: float = 1e-5
+    n_es_int: float = 1.0
+    n_es_cont: float = 1.0
 
     def __post_init__(self):
         for name, value in asdict(self).items():
+            if name.startswith("n_es"):
+                if not (isinstance(value, int | float) and np.isfinite(value) and value >= 1):
+                    raise ValueError(f"budget.{name} must be a number >= 1 (effective samples), "
+                                     f"got {value!r}")
+                object.__setattr__(self, name, float(value))
+                continue
             object.__setattr__(self, name, check_probability(f"budget.{name}", value))
         if self.p_thresh >= self.phmi_v + self.phmi_h:
             raise ValueError(
@@ -62,3 +76,23 @@ BUDGET_LPV200 = IntegrityBudget(
 #: LPV-200 allocation of MAAST for ARAIM (main_maast_araim.m, 2018 and 2024 releases)
 BUDGET_LPV200_MAAST = IntegrityBudget(
     phmi_v=9.8e-8, phmi_h=2e-9, p_fa_v=3.9e-6, p_fa_h=9e-7, p_thresh=6e-8, p_emt=1e-5)
+
+
+def exposure_probability(p_instantaneous, exposure_s, mean_fault_duration_s):
+    """The prior of a fault over an exposure window, ADD v4.2 (MAAST 2024: ``p (1 + tau)``,
+    tau = T_exp / MFD): P (1 + T_exp / MFD), the probability that a fault with instantaneous
+    probability P and mean duration MFD is present at some time within T_exp. Pass the result
+    as ``p_sat`` / ``p_const``.
+
+    The ADD keeps the instantaneous prior in the PL equation and caps each term at the
+    exposure prior (P_inst min(Q, P_exp / P_inst)); using P_exp as the term's weight, as this
+    does, is never smaller (conservative) and keeps the PL equation smooth for the solver.
+    Off by default: the studies use instantaneous priors (T_exp = 0)."""
+    tau = np.asarray(exposure_s, np.float64) / np.asarray(mean_fault_duration_s, np.float64)
+    if np.any(~np.isfinite(tau)) or np.any(tau < 0):
+        raise ValueError("exposure_s and mean_fault_duration_s must be finite, >= 0 and > 0")
+    p = np.asarray(p_instantaneous, np.float64) * (1.0 + tau)
+    if np.any(p >= 1.0):
+        raise ValueError(f"the exposure prior P (1 + T_exp / MFD) reaches {float(np.max(p))} "
+                         ">= 1: shorten the exposure or lower P")
+    return p

@@ -449,15 +449,6 @@ def _event_indices(n_sources: int, n_constellations: int, order: int):
     return src, con, n_src, tpl.order, within, own
 
 
-def _blocks_rows(rows, like):
-    """Stack (B,) rows into an array like ``like`` (E, B) by in-place row updates (a stack or
-    concatenation fused with its parts runs one branchy loop per element: ``mhss._blocks``)."""
-    out = jnp.zeros_like(like)
-    for t, r in enumerate(rows):
-        out = jax.lax.dynamic_update_slice_in_dim(out, r[None], t, axis=0)
-    return linalg.materialize(out)
-
-
 def _pad(x, value):
     """x (K, B) with one more row ``value`` (the sentinel slot of ``_event_indices``)."""
     return jnp.concatenate([x, jnp.full((1,) + x.shape[1:], value, x.dtype)], axis=0)
@@ -548,10 +539,10 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                 f = linalg.materialize(inside & (prior < rule.fc_thres * prior[own[c]][None]))
                 fold.append(f)
                 mass.append(_usum(jnp.where(f, prior, 0.0), 0))
-            rows = [prior[t] for t in range(E)]
-            for c in range(C):
-                rows[own[c]] = rows[own[c]] + mass[c]
-            prior = _blocks_rows(rows, prior)
+            for c in range(C):  # the constellation modes' rows only
+                prior = jax.lax.dynamic_update_slice_in_dim(
+                    prior, (prior[own[c]] + mass[c])[None], int(own[c]), axis=0)
+            prior = linalg.materialize(prior)
             cand = linalg.materialize(exists & ~functools.reduce(jnp.logical_or, fold))
         cp = linalg.materialize(jnp.where(cand, prior, 0.0))
         idx = np.arange(E)
@@ -568,11 +559,28 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
             forced = cand & (prior > budget.phmi_v + budget.phmi_h)
             other = linalg.materialize(jnp.where(forced, 0.0, cp))
             ni = n_out[:T]
-            suffix = jnp.broadcast_to(tail, ni.shape)
-            for j in range(T):  # slots: sources out, then enumeration order
-                nj = n_out[j][None]
-                after = (nj > ni) | ((nj == ni) & jnp.asarray(idx[:T] <= j)[:, None])
-                suffix = suffix + jnp.where(after, other[j][None], 0.0)
+            if max_order == 1:
+                # order-1 slots: the singles (1 source out) come first in index order, then
+                # the constellation modes by n_c; a reverse running sum for the singles and
+                # C x C comparisons for the constellations instead of T x T
+                const_other = _usum(other[L:T], 0)
+                run, rows = tail + const_other, [None] * L
+                for l in range(L - 1, -1, -1):
+                    run = run + other[l]
+                    rows[l] = run
+                for c in range(C):
+                    r = tail
+                    for d in range(C):
+                        after = (n_c[d] > n_c[c]) | ((n_c[d] == n_c[c]) & (d >= c))
+                        r = r + jnp.where(after, other[L + d], 0.0)
+                    rows.append(r)
+                suffix = jnp.stack(rows)
+            else:
+                suffix = jnp.broadcast_to(tail, ni.shape)
+                for j in range(T):  # slots: sources out, then enumeration order
+                    nj = n_out[j][None]
+                    after = (nj > ni) | ((nj == ni) & jnp.asarray(idx[:T] <= j)[:, None])
+                    suffix = suffix + jnp.where(after, other[j][None], 0.0)
             if E > T:
                 # the sets beyond the slots come after every slot with as many sources out or
                 # fewer (they are later in the enumeration): one sum per distinct slot count
@@ -638,13 +646,24 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                                                              dtype)[:, None], 0.0)
     code = linalg.materialize(code)
     pr = prior[:T]
-    dup = jnp.zeros(sel.shape, bool)
-    merged = jnp.zeros(pr.shape, dtype)
-    for j in range(T):
-        same = (code[j][None] == code) & sel[j][None] & sel
-        dup = dup | (same & jnp.asarray(np.arange(T) > j)[:, None])
-        merged = merged + jnp.where(same, pr[j][None], 0.0)
-    live = sel & ~dup
+    if max_order == 1:
+        # order-1 slots: a constellation mode duplicates a single only when the constellation
+        # has that one source; it then joins the (earlier) single
+        lone = member & (n_c == 1)[None]  # (L, C, B)
+        sel_s, sel_c = sel[:L], sel[L:T]
+        dup_c = sel_c & _uany(lone & sel_s[:, None], 0)
+        gain = _usum(jnp.where(lone & sel_c[None], pr[L:T][None], 0.0), 1)  # (L, B)
+        live = sel & jnp.concatenate([jnp.ones((L,) + sel.shape[1:], bool), ~dup_c], axis=0)
+        merged = pr + jnp.concatenate([jnp.where(sel_s, gain, 0.0), jnp.zeros_like(pr[L:T])],
+                                      axis=0)
+    else:
+        dup = jnp.zeros(sel.shape, bool)
+        merged = jnp.zeros(pr.shape, dtype)
+        for j in range(T):
+            same = (code[j][None] == code) & sel[j][None] & sel
+            dup = dup | (same & jnp.asarray(np.arange(T) > j)[:, None])
+            merged = merged + jnp.where(same, pr[j][None], 0.0)
+        live = sel & ~dup
     prior_out = jnp.where(live, merged, 0.0)
     excl_c = jnp.asarray((np.arange(C)[None] == k0[:, None]) | (np.arange(C)[None] == k1[:, None])
                          )[:, :, None] & present[None]  # (T, C, B)

@@ -654,7 +654,8 @@ def ramp_risk(maps: MonitorMaps, source, direction, rate_mps, duration_s, epoch_
 def allocated_budget(budget: IntegrityBudget, p_not_monitored):
     """(horizontal, vertical) integrity risk the PL equations allocate to the monitored modes
     and the fault-free case: PHMI (1 - P_NM / (PHMI_V + PHMI_H)) (seed 004 eqs. 14-16)."""
-    scale = 1.0 - np.asarray(p_not_monitored) / (budget.phmi_v + budget.phmi_h)
+    scale = (1.0 - np.asarray(p_not_monitored) / (budget.phmi_v + budget.phmi_h)
+             ) / budget.n_es_int
     return budget.phmi_h * scale, budget.phmi_v * scale
 
 

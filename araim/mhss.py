@@ -505,8 +505,9 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     # K_fa depends on N_f only: a table over N_f = 0..K (N_f = 0 read as 1), evaluated on the
     # host (an ndtri per geometry and direction was 2 % of the kernel)
     nf = np.maximum(np.arange(monitored.shape[0] + 1), 1)
-    k_h = jnp.take(jnp.asarray(-special.ndtri(budget.p_fa_h / (4.0 * nf)), dtype), n_modes)
-    k_v = jnp.take(jnp.asarray(-special.ndtri(budget.p_fa_v / (2.0 * nf)), dtype), n_modes)
+    pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
+    k_h = jnp.take(jnp.asarray(-special.ndtri(pfa_h / (4.0 * nf)), dtype), n_modes)
+    k_v = jnp.take(jnp.asarray(-special.ndtri(pfa_v / (2.0 * nf)), dtype), n_modes)
     k_fa = linalg.materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
     threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
@@ -935,7 +936,7 @@ def _solve_pl_bracketed(coef, mean, sd, rhs, iterations=PL_ITERATIONS, factors=N
 
 def _pls_from_projection(pr, budget, iterations):
     """PLs (3, B), status (B,), EMT (B,) from a batch-last Projection."""
-    scale = 1.0 - pr.p_not_monitored / (budget.phmi_v + budget.phmi_h)
+    scale = (1.0 - pr.p_not_monitored / (budget.phmi_v + budget.phmi_h)) / budget.n_es_int
     rhs_hv = jnp.stack([0.5 * budget.phmi_h * scale, budget.phmi_v * scale], axis=0)  # (2, B)
     rhs_hv = jnp.where(rhs_hv > 0, rhs_hv, budget.phmi_v)  # status marks P_nm > P_thresh
     coef = pr.prior.at[0].set(2.0)[:, None]  # (K, 1, B)

@@ -406,12 +406,13 @@ def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat
     if p_nm > budget.p_thresh:
         return failed(UNMONITORED_RISK, p_nm, n_f, aiv, monitored, singular)
 
-    k_fa = np.array([q_inv(budget.p_fa_h / (4 * n_f)), q_inv(budget.p_fa_h / (4 * n_f)),
-                     q_inv(budget.p_fa_v / (2 * n_f))]) if n_f else np.zeros(3)
+    pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
+    k_fa = np.array([q_inv(pfa_h / (4 * n_f)), q_inv(pfa_h / (4 * n_f)),
+                     q_inv(pfa_v / (2 * n_f))]) if n_f else np.zeros(3)
     for sol in monitored:
         sol.threshold = k_fa * sol.sigma_ss
 
-    scale = 1.0 - p_nm / (budget.phmi_v + budget.phmi_h)
+    scale = (1.0 - p_nm / (budget.phmi_v + budget.phmi_h)) / budget.n_es_int
     rhs = np.array([budget.phmi_h / 2, budget.phmi_h / 2, budget.phmi_v]) * scale
     priors = np.array([m.mode.prior for m in monitored])
     pl = np.zeros(3)
@@ -434,7 +435,7 @@ def pl_equation(res, budget, q, pl):
     lhs = 2.0 * q_func((pl - aiv.bias[q]) / aiv.sigma[q])
     for m in res.monitored:
         lhs += m.mode.prior * q_func((pl - m.threshold[q] - m.bias[q]) / m.sigma[q])
-    scale = 1.0 - res.p_not_monitored / (budget.phmi_v + budget.phmi_h)
+    scale = (1.0 - res.p_not_monitored / (budget.phmi_v + budget.phmi_h)) / budget.n_es_int
     rhs = (budget.phmi_h / 2.0 if q < 2 else budget.phmi_v) * scale
     return float(lhs), float(rhs)
 
@@ -461,8 +462,9 @@ def solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_s
         return Separation(res, np.zeros((0, 3)), np.zeros((0, 3)), False, [])
     if res.status != OK:  # thresholds need K_fa, which needs N_f only
         n_f = res.n_modes
-        k_fa = np.array([q_inv(budget.p_fa_h / (4 * n_f)), q_inv(budget.p_fa_h / (4 * n_f)),
-                         q_inv(budget.p_fa_v / (2 * n_f))])
+        pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
+        k_fa = np.array([q_inv(pfa_h / (4 * n_f)), q_inv(pfa_h / (4 * n_f)),
+                         q_inv(pfa_v / (2 * n_f))])
         for sol in res.monitored:
             sol.threshold = k_fa * sol.sigma_ss
     sep = np.array([(m.s_pos - res.all_in_view.s_pos) @ y for m in res.monitored])

@@ -616,6 +616,7 @@ class AvailabilityMap(SweepStudy):
             "protection_levels": int(lats.size * lons.size * t.size),
             "gnss_slots": lay["n_slots"], "sop_slots": lay["n_sops"],
             "mhss_max_order": lay["max_order"],
+            "fault_modes": params["fault_modes"],
             "service_level": lay["level"].name,
             "requirements_m": {k: (None if np.isinf(v) else v)
                                for k, v in req._asdict().items()},
@@ -625,16 +626,18 @@ class AvailabilityMap(SweepStudy):
                  f"% ({lay['level'].name})", "unit": "%", "published": None,
                  "reproduced": metrics["coverage_pct"],
                  "note": "area-weighted (cos latitude); no seed publishes a map, MAAST is the "
-                 "reference implementation"},
+                 f"reference implementation; fault modes {params['fault_modes']}"},
                 {"quantity": "mean availability over the grid", "unit": "%", "published": None,
-                 "reproduced": metrics["availability_mean_pct"], "note": ""}]
+                 "reproduced": metrics["availability_mean_pct"],
+                 "note": f"fault modes {params['fault_modes']}"}]
         out = out.assign_attrs(service_level=lay["level"].name, sky_source=sky_desc,
                                target=lay["target"], coverage_pct=metrics["coverage_pct"],
                                coastlines=params["coastlines"],
                                **{f"{k}_limit": (-1.0 if np.isinf(v) else v)
                                   for k, v in req._asdict().items()})
         return StudyResult(out, rows, metrics, {"sky_source": sky_desc,
-                                                 "service_level": lay["level"].name})
+                                                 "service_level": lay["level"].name,
+                                                 "fault_modes": params["fault_modes"]})
 
     def plot(self, out_dir):
         import matplotlib.pyplot as plt

@@ -117,21 +117,53 @@ def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_so
         valid=jnp.ones(shape, bool))
 
 
-def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
-    """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/."""
+def blanch_2012_inputs(n, seed=1):
+    """n random 5 GPS + 5 Galileo skies with the inputs of Blanch et al. 2012 Appendix J
+    (P_sat 1e-4, P_const 1e-4, b_nom 0.5 m, ADD error models): under ``blanch-2012`` each
+    monitors 57 modes (10 satellites, 45 pairs, 2 constellations)."""
+    from oaraim import araim
+
+    k1, k2 = jax.random.split(jax.random.key(seed))
+    az1, el1 = geometry.random_sky(k1, 5, np.deg2rad(5.0), (n,))
+    az2, el2 = geometry.random_sky(k2, 5, np.deg2rad(5.0), (n,))
+    az, el = jnp.concatenate([az1, az2], -1), jnp.concatenate([el1, el2], -1)
+    vi, va = araim.error_models.gnss_variances(el, 0.75)
+    shape = (n, 10)
+    return dict(g=geometry.geometry_rows(az, el),
+                constellation=jnp.broadcast_to(jnp.array([0] * 5 + [1] * 5), shape),
+                var_int_m2=vi, var_acc_m2=va, b_nom_m=jnp.full(shape, 0.5),
+                p_sat=jnp.full(shape, 1e-4), p_const=jnp.full((n, 2), 1e-4),
+                valid=jnp.ones(shape, bool))
+
+
+#: the cases of ``bench_mhss``: inputs, budget, template order, fault-mode convention
+MHSS_CASES = {
+    # seed 004 Table I, the seed 004 studies' convention; order 1 is what max_order=None picks
+    # (P(> 1 faulty constellation) = 4.5e-8)
+    "table-i": (mhss_bench_inputs, "BUDGET_SEED004_TABLE_I", 1, "grouped"),
+    # the same geometries under the current ADD (the kernels' default)
+    "table-i-add-v4.2": (mhss_bench_inputs, "BUDGET_SEED004_TABLE_I", 1, "add-v4.2"),
+    # pairs of satellites: Blanch et al. 2012 Appendix J's inputs, 57 modes
+    "blanch-2012-57-modes": (blanch_2012_inputs, "BUDGET_LPV200", 2, "blanch-2012"),
+}
+
+
+def bench_mhss(batch=65_536, ref_geometries=200, repeats=5, case="table-i"):
+    """MHSS protection levels (HPL, VPL, EMT) per second, and the NumPy reference of tests/,
+    for one of ``MHSS_CASES``."""
     from oaraim import araim
     from oaraim.araim.batching import default_threads
 
-    x = mhss_bench_inputs(batch)
-    budget = araim.BUDGET_SEED004_TABLE_I
-    order = 1  # what protection_levels(max_order=None) picks here (P(>1 faulty) = 4.5e-8)
+    inputs, budget_name, order, fault_modes = MHSS_CASES[case]
+    x = inputs(batch)
+    budget = getattr(araim, budget_name)
     args = (x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
             x["p_sat"], x["p_const"], x["valid"])
 
     def call(threads=None):
         # the public entry point, host-side input checks and thread split included
         return araim.protection_levels(*args[:7], budget, args[7], max_order=order,
-                                       threads=threads)
+                                       threads=threads, fault_modes=fault_modes)
 
     def run():
         return call().hpl_m.block_until_ready()
@@ -141,7 +173,8 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
     call(1).hpl_m.block_until_ready()
     t1 = _best_time(lambda: call(1).hpl_m.block_until_ready(), repeats)
     res = call()
-    out = {"batch": batch, "jax_s": t, "jax_pl_per_s": batch / t,
+    out = {"case": case, "fault_modes": fault_modes, "order": order,
+           "batch": batch, "jax_s": t, "jax_pl_per_s": batch / t,
            "threads": default_threads(), "one_thread_pl_per_s": batch / t1,
            "status_ok_share": float(np.mean(np.asarray(res.status) == 0)),
            "n_modes": int(np.max(np.asarray(res.n_modes))), "host": host_info()}
@@ -151,7 +184,7 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5):
         return [reference_mhss.protection_levels_reference(
             xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
             xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
-            max_order=order) for i in range(ref_geometries)]
+            max_order=order, fault_modes=fault_modes) for i in range(ref_geometries)]
 
     # best of 3, as the JAX side is best of ``repeats`` after a warm-up call: one cold
     # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
@@ -178,8 +211,10 @@ def profile_mhss(batch=65_536, repeats=3):
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
     from oaraim import araim
     from oaraim.araim.batching import jit_kernel, map_chunks
-    from oaraim.araim.fault_modes import fault_modes_batch_last
+    from oaraim.araim.fault_modes import FaultModeRule, fault_modes_batch_last
     from oaraim.araim.mhss import PL_ITERATIONS, _batch_last_inputs, _pls_from_projection, _project
+
+    GROUPED = FaultModeRule("grouped")  # the Table I case's convention (``MHSS_CASES``)
 
     x = mhss_bench_inputs(batch)
     budget = araim.BUDGET_SEED004_TABLE_I
@@ -192,7 +227,7 @@ def profile_mhss(batch=65_536, repeats=3):
             if upto == "fault_modes":
                 out = fault_modes_batch_last(a[7], a[1], a[5], a[6], budget.p_thresh, 1).prior
             else:
-                pr = _project(*a, budget, 1, "int")
+                pr = _project(*a, budget, 1, "int", fault_modes=GROUPED)
                 if upto == "projectors":
                     out = pr.threshold + pr.bias + pr.sigma
                 else:
@@ -387,6 +422,18 @@ def markdown_table(bench_json: dict) -> str:
         rows.append(("MHSS protection levels (seed 004), `araim.protection_levels`",
                      f"9 GPS + 4 SOPs, Table I, {m['n_modes']} modes, batch {m['batch']:,}, "
                      f"{m['threads']} threads",
+                     _rate(m["jax_pl_per_s"], "PL/s"), *ref, *host(m)))
+    for key, what in (("mhss_add_v42", "the same, `fault_modes=\"add-v4.2\"` (the default)"),
+                      ("mhss_blanch_2012", "MHSS, pairs of satellites, `blanch-2012`")):
+        if key not in bench_json:
+            continue
+        m = bench_json[key]
+        ref = (_rate(m["reference_pl_per_s"], "PL/s"), f"{m['speedup']:,.0f}x") \
+            if "speedup" in m else ("-", "-")
+        case = ("9 GPS + 4 SOPs, Table I" if m["case"].startswith("table-i") else
+                "5 GPS + 5 Galileo, Blanch 2012 App. J inputs")
+        rows.append((what, f"{case}, {m['n_modes']} modes, order {m['order']}, batch "
+                     f"{m['batch']:,}, {m['threads']} threads",
                      _rate(m["jax_pl_per_s"], "PL/s"), *ref, *host(m)))
     if "fig3" in bench_json:
         f = bench_json["fig3"]

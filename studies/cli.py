@@ -225,6 +225,14 @@ def bench(
         out.print(f"  NumPy reference: {m['reference_pl_per_s']:,.1f} PL/s -> "
                   f"{m['speedup']:,.0f}x; max |difference| {m['max_abs_diff_m']:.1e} m",
                   highlight=False)
+    for key, case in (("mhss_add_v42", "table-i-add-v4.2"),
+                      ("mhss_blanch_2012", "blanch-2012-57-modes")):
+        res[key] = m = b.bench_mhss(batch=16_384 if quick else 65_536,
+                                    ref_geometries=20 if quick else 50, case=case)
+        out.print(f"  {case} ({m['fault_modes']}, order {m['order']}, {m['n_modes']} modes): "
+                  f"{m['jax_pl_per_s']:,.0f} PL/s; NumPy reference "
+                  f"{m['reference_pl_per_s']:,.1f} PL/s -> {m['speedup']:,.0f}x; max "
+                  f"|difference| {m['max_abs_diff_m']:.1e} m", highlight=False)
     p = b.profile_mhss(batch=16_384 if quick else 65_536)
     res["mhss_profile"] = p
     out.print(f"  profile ({p['cpu_us_per_pl']:.1f} CPU-us per PL): fault modes "

@@ -405,7 +405,8 @@ class RinexReplay(Study):
             {"quantity": f"median HPE, {Path(obs.path).name}", "unit": "m", "published": None,
              "reproduced": m["hpe_median_m"], "note": note},
             {"quantity": "median HPL, ARAIM / MHSS (Table I)", "unit": "m", "published": None,
-             "reproduced": m["hpl_mhss_median_m"], "note": "hpl_median_m"},
+             "reproduced": m["hpl_mhss_median_m"],
+             "note": f"hpl_median_m; fault modes {params['fault_modes']}"},
             {"quantity": "median HPL, slope RAIM", "unit": "m", "published": None,
              "reproduced": m["hpl_slope_median_m"],
              "note": f"P_FA {params['p_fa']:g}, P_MD {params['p_md']:g}"},
@@ -416,7 +417,8 @@ class RinexReplay(Study):
                      f"{m['misleading_information_epochs_slope']} of {m['epochs']} epochs"},
         ]
         return StudyResult(ds, rows, m, extra_provenance={
-            "obs_file": obs.path, "nav_file": str(nav_path), "truth_source": truth_src})
+            "obs_file": obs.path, "nav_file": str(nav_path), "truth_source": truth_src,
+            "fault_modes": params["fault_modes"]})
 
     def plot(self, out_dir):
         import matplotlib.pyplot as plt

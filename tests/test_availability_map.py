@@ -155,7 +155,8 @@ def test_every_pl_matches_the_numpy_oracle(small):
                     np.where(gal, vi_e, vi_g), np.where(gal, va_e, va_g),
                     np.where(gal, p["b_nom_gal_m"], p["b_nom_gps_m"]),
                     np.where(gal, p["p_sat_gal"], p["p_sat_gps"]), lay["p_const"],
-                    lay["level"].budget, max_order=lay["max_order"])
+                    lay["level"].budget, max_order=lay["max_order"],
+                    fault_modes=p["fault_modes"])
                 got = [ds[n].values[i, j, k] for n in ("hpl_m", "vpl_m", "emt_m",
                                                        "sigma_acc_m")]
                 want = [ref.hpl_m, ref.vpl_m, ref.emt_m, ref.sigma_acc_u_m]
@@ -182,8 +183,10 @@ def test_maps_and_summary_follow_from_the_cube(small):
 
 
 def test_bpp_towers_are_fixed_per_user_and_counted(shared_data):
+    # the tower mechanics do not depend on the fault-mode convention; grouped keeps the
+    # compiled template small (the ADD rules monitor every pair of the 6 towers' events here)
     p = STUDY.validate({**SMALL, "lat_deg": "50", "sops_per_km2": "0.5",
-                        "d_max_m": "2000", "max_sops": "8"})
+                        "d_max_m": "2000", "max_sops": "8", "fault_modes": "grouped"})
     n = am.bpp_count(p)
     assert n == min(round(0.5 * np.pi * (2000.0**2 - 5.0**2) / 1e6), 8) == 6
     lay = am.layout(p)
@@ -203,7 +206,8 @@ def test_tower_csv_gives_one_constellation_per_carrier(tmp_path, shared_data):
     f = tmp_path / "towers.csv"
     f.write_text("lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.0,0.02,30,B\n"
                  "49.99,-0.01,25,A\n10,10,30,A\n")
-    p = STUDY.validate({**SMALL, "lat_deg": "50", "towers": str(f), "max_sops": "4"})
+    p = STUDY.validate({**SMALL, "lat_deg": "50", "towers": str(f), "max_sops": "4",
+                        "fault_modes": "grouped"})  # (as above)
     az, el, valid, label, n_car = am.tower_slots(str(f), 50.0, p["lon_deg"], p["d_min_m"],
                                                  p["d_max_m"], 4, 0.0)
     assert n_car == 2 and valid.sum(-1).tolist() == [0, 3, 0]

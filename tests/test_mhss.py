@@ -29,6 +29,7 @@ from oaraim.araim.error_models import gnss_variances, sop_variances
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
 protection_levels = partial(araim.protection_levels, fault_modes="grouped")
+GROUPED = araim.FaultModeRule("grouped")
 
 L_GPS, L_GAL, L_SOP = 12, 8, 8
 L = L_GPS + L_GAL + L_SOP
@@ -956,14 +957,15 @@ def test_threaded_split_is_bit_identical_to_one_call():
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I
-    one = protection_levels_threaded(args, budget, 1, threads=1)
+    one = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
     # shapes compiled: 1573 (one call), 1024 (2 parts of 4 chunks), 768 (3 parts of 3 chunks,
     # and the unsplit 3-chunk batch)
     for n, threads in ((6 * CHUNK + 37, 2), (6 * CHUNK + 37, 3), (3 * CHUNK, 2)):
         part = tuple(a[:n] for a in args)
-        ref = one if n == 6 * CHUNK + 37 else protection_levels_threaded(part, budget, 1,
-                                                                         threads=1)
-        got = protection_levels_threaded(part, budget, 1, threads=threads)
+        ref = one if n == 6 * CHUNK + 37 else protection_levels_threaded(
+            part, budget, 1, threads=1, fault_modes=GROUPED)
+        got = protection_levels_threaded(part, budget, 1, threads=threads,
+                                         fault_modes=GROUPED)
         for name, a, b in zip(got._fields, got, ref, strict=True):
             assert a.shape == b.shape and np.array_equal(np.asarray(a), np.asarray(b)), name
     assert np.all(np.isfinite(np.asarray(one.hpl_m)))
@@ -1001,10 +1003,10 @@ def test_kernel_compiler_options_change_no_bit():
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I
-    got = protection_levels_threaded(args, budget, 1, threads=1)
+    got = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
     want = jax.jit(_protection_levels, static_argnames=(
-        "budget", "max_order", "all_in_view_weighting", "iterations"))(
-        *args, budget=budget, max_order=1)
+        "budget", "max_order", "all_in_view_weighting", "iterations", "fault_modes"))(
+        *args, budget=budget, max_order=1, fault_modes=GROUPED)
     assert np.all(np.isfinite(np.asarray(want.hpl_m)))
     for name, a, b in zip(got._fields, got, want, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name
