@@ -99,14 +99,20 @@ class FaultModeSet:
     modes: list = field(default_factory=list)
 
 
-def fault_mode_set(valid, constellation, p_sat, p_const, p_thresh, max_order):
-    """Enumerate the candidate fault modes and their priors for one geometry."""
+def _inputs(valid, constellation, p_sat, p_const):
+    """The fault-mode inputs as arrays, the present constellations and their valid sources."""
     valid = np.asarray(valid, bool)
     constellation = np.asarray(constellation, int)
-    p_sat = np.asarray(p_sat, float)
-    p_const = np.asarray(p_const, float)
     present = sorted({int(c) for c in constellation[valid]})
     sources = {c: [int(l) for l in np.flatnonzero(valid & (constellation == c))] for c in present}
+    return (valid, constellation, np.asarray(p_sat, float), np.asarray(p_const, float), present,
+            sources)
+
+
+def fault_mode_set(valid, constellation, p_sat, p_const, p_thresh, max_order):
+    """Enumerate the candidate fault modes and their priors for one geometry."""
+    valid, constellation, p_sat, p_const, present, sources = _inputs(valid, constellation,
+                                                                     p_sat, p_const)
 
     p_none, p_single, p_whole, p_fault = {}, {}, {}, {}
     for c in present:
@@ -170,12 +176,8 @@ def event_fault_mode_set(valid, constellation, p_sat, p_const, budget, rule="add
     fits); selected sets of more than ``max_order`` events are not monitored (they stay in
     P_NM); selected sets with the same exclusion set are one mode, priors summed.
     """
-    valid = np.asarray(valid, bool)
-    constellation = np.asarray(constellation, int)
-    p_sat = np.asarray(p_sat, float)
-    p_const = np.asarray(p_const, float)
-    present = sorted({int(c) for c in constellation[valid]})
-    sources = {c: [int(l) for l in np.flatnonzero(valid & (constellation == c))] for c in present}
+    valid, constellation, p_sat, p_const, present, sources = _inputs(valid, constellation,
+                                                                     p_sat, p_const)
     events = [("s", int(l)) for l in np.flatnonzero(valid)] + [("c", c) for c in present]
     p_ev = {e: (p_sat[e[1]] if e[0] == "s" else p_const[e[1]]) for e in events}
 
