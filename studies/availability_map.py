@@ -193,16 +193,25 @@ def _orbit_source(choice, default_file, nominal):
     return choice
 
 
+#: ``sky_time``: where the map's epoch 0 lies for an almanac
+SKY_TIMES = ("week", "toa")
+
+
 @functools.lru_cache(maxsize=4)
-def constellation_orbits(gps, galileo, duration_s, step_s):
+def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week"):
     """Satellite ECEF ``(T, S, 3)``, usable mask ``(T, S)``, constellation codes ``(S,)``,
     satellite names, epoch offsets ``(T,)`` (s from the start) and a description.
 
-    Each orbit source runs on its own clock from its own reference epoch: an almanac from its
-    earliest time of applicability (MAAST propagates each almanac from its own epoch), a
-    navigation file from 00:00 of the day holding most of its records. The offsets are the
-    epochs of the map: 0, step_s, ... < duration_s.
+    ``sky_time="week"`` (MAAST): every almanac is evaluated at the same time of its own GPS
+    week, epoch 0 at the week's start (MAAST's ``alm2satposvel`` at t = TStart .. TEnd with
+    t_k = t - t_oa in seconds of the week), so GPS and Galileo almanacs of different epochs see
+    the sky of one common time. ``"toa"``: each almanac from its own earliest time of
+    applicability (the sky closest to its epoch). A navigation file runs from 00:00 of the day
+    holding most of its records, a nominal constellation from its reference epoch, in both.
+    The offsets are the epochs of the map: 0, step_s, ... < duration_s.
     """
+    if sky_time not in SKY_TIMES:
+        raise ValueError(f"sky_time must be one of {', '.join(SKY_TIMES)}, got {sky_time!r}")
     t_off = np.arange(0.0, duration_s - 1e-9, step_s)
     parts, desc = [], []
     for name, choice, default, nominal, code in (
@@ -219,7 +228,9 @@ def constellation_orbits(gps, galileo, duration_s, step_s):
             if isinstance(o, Ephemeris):
                 t0 = fig5.file_day_start(o)
             elif hasattr(o, "records"):
-                t0 = float(np.min(o.records.toa_s))
+                r = o.records
+                t0 = float(np.min(r.toa_s) if sky_time == "toa" else
+                           np.min(np.asarray(r.toa_s) - np.asarray(r.toa_tow_s)))
             else:  # a nominal constellation: its own reference epoch
                 t0 = float(getattr(o, "reference_t_gps_s", 0.0))
             e, v, sv = o.sat_position_ecef(t0 + t_off, prns=o.prns[keep])
@@ -237,9 +248,9 @@ def constellation_orbits(gps, galileo, duration_s, step_s):
 
 
 @functools.lru_cache(maxsize=8)
-def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m):
+def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week"):
     """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel."""
-    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s)
+    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time)
     lo = np.deg2rad(np.asarray(lons))
     most = 0
     for la in lats:
@@ -348,7 +359,8 @@ class MapRow:
     def __init__(self, params, lat_deg):
         p = params
         ecef, ok, cons, _, t_off, _ = constellation_orbits(p["gps"], p["galileo"],
-                                                           p["duration_s"], p["step_s"])
+                                                           p["duration_s"], p["step_s"],
+                                                           p["sky_time"])
         self.lat_rad = np.deg2rad(float(lat_deg))
         self.h_m = float(p["height_m"])
         self.mask_rad = float(np.deg2rad(p["mask_deg"]))
@@ -392,7 +404,7 @@ def _layout(key):
         base[i] if p[k] == "preset" else (np.inf if p[k] == "none" else float(p[k]))
         for i, k in enumerate(("val_m", "hal_m", "emt_m", "sigma_acc_m"))))
     n_slots = max_visible(p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"],
-                          p["lat_deg"], p["lon_deg"], p["height_m"])
+                          p["lat_deg"], p["lon_deg"], p["height_m"], p["sky_time"])
     n_slots = max(n_slots, 1)
     if p["towers"] != "none":
         n_carriers = len(read_towers(p["towers"])[4])
@@ -497,6 +509,9 @@ class AvailabilityMap(SweepStudy):
                   "YUMA/SEM almanac or RINEX navigation file"),
         "galileo": _p("auto", parse_orbits(GALILEO_ALMANAC),
                       f"Galileo orbits: auto ({GALILEO_ALMANAC}), nominal, none, or a file"),
+        "sky_time": _p("week", parse_choice(*SKY_TIMES), "epoch 0 of an almanac: week (MAAST: "
+                       "every almanac at the same time of its GPS week, from its start) or toa "
+                       "(each from its own earliest time of applicability)"),
         "mask_deg": _p(MAAST_DEFAULTS["mask_deg"], in_range(0.0, 89.0),
                        "elevation mask (MAAST/ADD: 5 deg)", "deg"),
         "sigma_ura_gps_m": _p(MAAST_DEFAULTS["sigma_ura_gps_m"], positive,
@@ -581,7 +596,8 @@ class AvailabilityMap(SweepStudy):
         lay = layout(params)
         req = lay["requirements"]
         *_, sky_desc = constellation_orbits(params["gps"], params["galileo"],
-                                            params["duration_s"], params["step_s"])
+                                            params["duration_s"], params["step_s"],
+                                            params["sky_time"])
         avail = av.availability(cube["available"][1], axis=-1)
         hpl995 = av.pl_percentile(cube["hpl_m"][1], 99.5)
         vpl995 = av.pl_percentile(cube["vpl_m"][1], 99.5)

@@ -110,7 +110,8 @@ def small(shared_data):
 
 def test_grid_sky_matches_geometry_sky(small, shared_data):
     """Satellites in view at every (lat, lon, epoch) of the cube equal geometry.sky's count
-    for the same receiver, each almanac on its own clock from its earliest t_oa."""
+    for the same receiver, every almanac at the same time of its GPS week (MAAST: epoch 0 at
+    the week's start, ``sky_time="week"``)."""
     p, res = small
     ds = res.dataset
     t_off = ds["time_s"].values
@@ -118,7 +119,9 @@ def test_grid_sky_matches_geometry_sky(small, shared_data):
     for name, file, system in (("gps", am.GPS_ALMANAC, "G"), ("galileo", am.GALILEO_ALMANAC,
                                                                "E")):
         alm = geometry.read_yuma(shared_data / file, system=system)
-        t0 = float(np.min(alm.records.toa_s))
+        week_start = alm.records.toa_s - alm.records.toa_tow_s
+        assert np.all(week_start == week_start[0]) and 0 <= alm.records.toa_tow_s[0] < 604800
+        t0 = float(week_start[0])
         lat, lon = np.meshgrid(np.deg2rad(ds["lat_deg"].values),
                                np.deg2rad(ds["lon_deg"].values), indexing="ij")
         rx = np.asarray(geometry.geodetic_to_ecef(lat, lon, 0.0))
@@ -137,7 +140,8 @@ def test_every_pl_matches_the_numpy_oracle(small):
     ds = res.dataset
     lay = am.layout(p)
     ecef, ok, cons, _, t_off, _ = am.constellation_orbits(p["gps"], p["galileo"],
-                                                          p["duration_s"], p["step_s"])
+                                                          p["duration_s"], p["step_s"],
+                                                          p["sky_time"])
     worst = 0.0
     for i, la in enumerate(ds["lat_deg"].values):
         for j, lo in enumerate(ds["lon_deg"].values):
