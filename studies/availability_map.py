@@ -36,7 +36,7 @@ import xarray as xr
 from oaraim import data, geometry
 from oaraim.araim import availability as av
 from oaraim.araim.batching import jit_kernel
-from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import _protection_levels, required_order
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
@@ -290,10 +290,11 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 
 
 @functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
-                                                "budget", "requirements", "fault_modes"))
+                                                "budget", "requirements", "fault_modes",
+                                                "airborne_model"))
 def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
                gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-               requirements, fault_modes="add-v4.2"):
+               requirements, fault_modes="add-v4.2", airborne_model="add"):
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
@@ -311,8 +312,9 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
     const = jnp.take(sat_const, order)
     is_gps = const == GPS
     el = jnp.where(vis, el, jnp.pi / 2)  # padding: finite, harmless, masked
-    vi_g, va_g = gnss_variances(el, gnss["sigma_ura_gps_m"])
-    vi_e, va_e = gnss_variances(el, gnss["sigma_ura_gal_m"])
+    user = AIRBORNE_MODELS[airborne_model]
+    vi_g, va_g = gnss_variances(el, gnss["sigma_ura_gps_m"], user_model=user)
+    vi_e, va_e = gnss_variances(el, gnss["sigma_ura_gal_m"], user_model=user)
     x = dict(var_int=jnp.where(is_gps, vi_g, vi_e), var_acc=jnp.where(is_gps, va_g, va_e),
              b_nom=jnp.where(is_gps, gnss["b_nom_gps_m"], gnss["b_nom_gal_m"]),
              p_sat=jnp.where(is_gps, gnss["p_sat_gps"], gnss["p_sat_gal"]),
@@ -373,7 +375,8 @@ class MapRow:
         lay = layout(p)
         self.static = dict(n_slots=lay["n_slots"], n_sops=lay["n_sops"], bpp=lay["bpp"],
                            max_order=lay["max_order"], budget=lay["level"].budget,
-                           requirements=lay["requirements"], fault_modes=p["fault_modes"])
+                           requirements=lay["requirements"], fault_modes=p["fault_modes"],
+                           airborne_model=p["airborne_model"])
         self.p_const = jnp.asarray(lay["p_const"])
         self.towers = None
         if p["towers"] != "none":
@@ -512,6 +515,9 @@ class AvailabilityMap(SweepStudy):
         "sky_time": _p("week", parse_choice(*SKY_TIMES), "epoch 0 of an almanac: week (MAAST: "
                        "every almanac at the same time of its GPS week, from its start) or toa "
                        "(each from its own earliest time of applicability)"),
+        "airborne_model": _p("add", parse_choice(*AIRBORNE_MODELS), "airborne error model: "
+                             "add (the ADD's dual-frequency curve, MAAST 2018) or ed259a "
+                             "(EUROCAE ED-259A, MAAST 2024)"),
         "mask_deg": _p(MAAST_DEFAULTS["mask_deg"], in_range(0.0, 89.0),
                        "elevation mask (MAAST/ADD: 5 deg)", "deg"),
         "sigma_ura_gps_m": _p(MAAST_DEFAULTS["sigma_ura_gps_m"], positive,

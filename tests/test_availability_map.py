@@ -10,7 +10,13 @@ from typer.testing import CliRunner
 
 from oaraim import geometry
 from oaraim.araim import availability as av
-from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.araim.error_models import (
+    AIRBORNE_MODELS,
+    gnss_variances,
+    sigma_user_airborne_m,
+    sigma_user_ed259a_m,
+    sop_variances,
+)
 from oaraim.geometry.ephemeris import GALILEO
 from oaraim.geometry.sky import look_angles
 from oaraim.reference_mhss import protection_levels_reference
@@ -152,8 +158,11 @@ def test_every_pl_matches_the_numpy_oracle(small):
                 v = valid[k]
                 gal = cons[v] == GALILEO
                 e = el[k][v]
-                vi_g, va_g = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gps_m"]))
-                vi_e, va_e = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gal_m"]))
+                user = AIRBORNE_MODELS[p["airborne_model"]]
+                vi_g, va_g = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gps_m"],
+                                                                    user_model=user))
+                vi_e, va_e = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gal_m"],
+                                                                    user_model=user))
                 ref = protection_levels_reference(
                     np.asarray(geometry.geometry_rows(az[k][v], e)), cons[v],
                     np.where(gal, vi_e, vi_g), np.where(gal, va_e, va_g),
@@ -302,3 +311,21 @@ def test_coastlines_from_geojson_are_read_and_drawn(tmp_path, small):
     res.dataset.assign_attrs(coastlines=str(f)).to_zarr(out / "data.zarr",
                                                          consolidated=False)
     assert STUDY.plot(out) == [f"{out}/availability_maps.png"]
+
+
+def test_ed259a_airborne_model_hand_values_and_map():
+    """ED-259A (MAAST 2024): at the zenith sqrt(0.4^2 + (0.34 + 0.40 exp(-90 / 14))^2 +
+    (40 / 8361 + 0.018)^2) =
+    0.52589 m (by hand), at 5 deg half the ADD curve's 1.49 m; a map run selects it (its
+    sigma_acc differs from the ADD curve's; the oracle comparison above covers the path)."""
+    zen = float(sigma_user_ed259a_m(np.pi / 2))
+    assert zen == pytest.approx(np.sqrt(0.16 + (0.34 + 0.4 * np.exp(-90 / 14)) ** 2
+                                        + (40 / 8361 + 0.018) ** 2), rel=1e-12)
+    assert zen == pytest.approx(0.52589, abs=1e-5)
+    assert float(sigma_user_ed259a_m(np.deg2rad(5.0))) < 0.51 * float(
+        sigma_user_airborne_m(np.deg2rad(5.0)))
+    p = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0", "airborne_model": "ed259a"})
+    q = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0"})
+    a = STUDY.run(p, STUDY.fixed_realizations(p), 0).dataset["sigma_acc_m"].values
+    b = STUDY.run(q, STUDY.fixed_realizations(q), 0).dataset["sigma_acc_m"].values
+    assert np.all(np.isfinite(a)) and not np.allclose(a, b)
