@@ -391,11 +391,6 @@ def template_source(rule: FaultModeRule, n_sources: int, n_constellations: int,
     return event_template(n_sources, n_constellations, max_order).sources[:, 0]
 
 
-def n_template_modes(rule: FaultModeRule, n_sources: int, n_constellations: int,
-                     max_order: int) -> int:
-    return template_source(rule, n_sources, n_constellations, max_order).size
-
-
 def _event_tails(p, order: int):
     """(P(exactly k events) for k = 0..order, P(more than order events)) for independent events
     p (E, B), as sums of non-negative terms."""
@@ -409,25 +404,8 @@ def _event_tails(p, order: int):
     return dist, tail
 
 
-def _unrolled(op):
-    """A reduction over a short non-minor axis written out as elementwise ops: XLA fuses and
-    vectorises them over the trailing batch axis (as ``mhss._sum``; a reduce over a non-minor
-    axis ran several times slower here)."""
-    def reduce(x, axis):
-        if x.shape[axis] == 0:
-            return jnp.zeros(x.shape[:axis] + x.shape[axis + 1:], x.dtype)
-        out = jax.lax.index_in_dim(x, 0, axis, keepdims=False)
-        for m in range(1, x.shape[axis]):
-            out = op(out, jax.lax.index_in_dim(x, m, axis, keepdims=False))
-        return out
-    return reduce
-
-
-_usum = _unrolled(jnp.add)
-_uany = _unrolled(jnp.logical_or)
-_umax = _unrolled(jnp.maximum)
-_umin = _unrolled(jnp.minimum)
-_uprod = _unrolled(jnp.multiply)
+_usum, _uany, _umax, _umin, _uprod = (linalg.sum_axis, linalg.any_axis, linalg.max_axis,
+                                      linalg.min_axis, linalg.prod_axis)
 
 
 @cache
@@ -480,6 +458,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     s0, s1, c0, c1 = src[:, 0], src[:, 1], con[:, 0], con[:, 1]
 
     lab = jnp.where(valid, constellation, -1)
+    labpad = _pad(lab, -1)
     member = lab[:, None, :] == jnp.arange(C)[None, :, None]  # (L, C, B), valid sources only
     n_c = _usum(member.astype(jnp.int32), 0)  # (C, B)
     present = n_c > 0
@@ -526,7 +505,6 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         prior = priors(ps, pc)
         _, tail = _event_tails(jnp.concatenate([ps, pc], axis=0), r_enum)
         cand = exists
-        labpad = _pad(lab, -1)
         if rule.consolidated:
             # fold every set inside one constellation c (its sources all in c, its
             # constellation, if any, c itself; not c's own mode) with prior below fc_thres x
@@ -560,11 +538,13 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
             other = linalg.materialize(jnp.where(forced, 0.0, cp))
             ni = n_out[:T]
             if max_order == 1:
-                # order-1 slots: the singles (1 source out) come first in index order, then
-                # the constellation modes by n_c; a reverse running sum for the singles and
-                # C x C comparisons for the constellations instead of T x T
-                const_other = _usum(other[L:T], 0)
-                run, rows = tail + const_other, [None] * L
+                # order-1 slots: the L singles (1 source out) come first in index order, then
+                # the C constellation modes by n_c; a reverse running sum for the singles and
+                # C x C comparisons for the constellations instead of T x T. The sets beyond
+                # the slots (E > T: the pairs the folding enumerates) are later in the
+                # enumeration, so they come after a slot when they have as many sources out
+                # or more: all of them after a single, those with n_out >= n_c after c
+                run, rows = tail + _usum(other[L:], 0), [None] * L
                 for l in range(L - 1, -1, -1):
                     run = run + other[l]
                     rows[l] = run
@@ -573,34 +553,16 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                     for d in range(C):
                         after = (n_c[d] > n_c[c]) | ((n_c[d] == n_c[c]) & (d >= c))
                         r = r + jnp.where(after, other[L + d], 0.0)
+                    for j in range(T, E):
+                        r = r + jnp.where(n_out[j] >= n_c[c], other[j], 0.0)
                     rows.append(r)
                 suffix = jnp.stack(rows)
-            else:
+            else:  # E == T: every set is a slot
                 suffix = jnp.broadcast_to(tail, ni.shape)
                 for j in range(T):  # slots: sources out, then enumeration order
                     nj = n_out[j][None]
                     after = (nj > ni) | ((nj == ni) & jnp.asarray(idx[:T] <= j)[:, None])
                     suffix = suffix + jnp.where(after, other[j][None], 0.0)
-            if E > T:
-                # the sets beyond the slots come after every slot with as many sources out or
-                # fewer (they are later in the enumeration): one sum per distinct slot count
-                # (the singles: 1; each constellation mode: its n_c)
-                beyond = _usum(other[T:], 0)
-                per_c = []
-                for c in range(C):
-                    g = 0.0
-                    for j in range(T, E):
-                        g = g + jnp.where(n_out[j] >= n_c[c], other[j], 0.0)
-                    per_c.append(g)
-                slot_c = np.array([c0[t] if (n_src[t] == 0 and c1[t] == C) else -1
-                                   for t in range(T)])
-                extra = jnp.stack([beyond if slot_c[t] < 0 else per_c[slot_c[t]]
-                                   for t in range(T)])
-                extra = jnp.where(jnp.asarray(n_src[:T] == 1)[:, None] | jnp.asarray(
-                    slot_c >= 0)[:, None], extra, 0.0)
-                if np.any((n_src[:T] != 1) & (slot_c < 0)):
-                    raise AssertionError("sets beyond the slots need order-1 slots")
-                suffix = suffix + extra
             sel = forced[:T] | (cand[:T] & (suffix > budget.p_thresh))
             if full and E > T:
                 # the first unforced set beyond the slots in the walk's order: the walk
@@ -634,17 +596,6 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     lidx = np.arange(L)[None, :, None]
     excluded = valid[None] & ((lidx == t0[:, None, None]) | (lidx == t1[:, None, None])
                               | (lab[None] == k0[:, None, None]) | (lab[None] == k1[:, None, None]))
-    two = 2.0 ** np.arange(L)
-    code_c = _pad(_usum(jnp.where(member, jnp.asarray(two, dtype)[:, None, None], 0.0), 0), 0.0)
-    labpad = _pad(lab, -1)
-    code = code_c[k0] + code_c[k1]
-    for s in (t0, t1):  # a named source not inside a named constellation
-        ls = labpad[s]
-        named = jnp.asarray(s < L)[:, None] & _pad(valid, False)[s]
-        inside = (ls == jnp.asarray(k0)[:, None]) | (ls == jnp.asarray(k1)[:, None])
-        code = code + jnp.where(named & ~inside, jnp.asarray(two[np.minimum(s, L - 1)],
-                                                             dtype)[:, None], 0.0)
-    code = linalg.materialize(code)
     pr = prior[:T]
     if max_order == 1:
         # order-1 slots: a constellation mode duplicates a single only when the constellation
@@ -657,6 +608,18 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         merged = pr + jnp.concatenate([jnp.where(sel_s, gain, 0.0), jnp.zeros_like(pr[L:T])],
                                       axis=0)
     else:
+        # equal exclusion sets by their codes sum_l 2^l (exact in float64 for L <= 52)
+        two = 2.0 ** np.arange(L)
+        code_c = _pad(_usum(jnp.where(member, jnp.asarray(two, dtype)[:, None, None], 0.0), 0),
+                      0.0)
+        code = code_c[k0] + code_c[k1]
+        for s in (t0, t1):  # a named source not inside a named constellation
+            ls = labpad[s]
+            named = jnp.asarray(s < L)[:, None] & _pad(valid, False)[s]
+            inside = (ls == jnp.asarray(k0)[:, None]) | (ls == jnp.asarray(k1)[:, None])
+            code = code + jnp.where(named & ~inside, jnp.asarray(two[np.minimum(s, L - 1)],
+                                                                 dtype)[:, None], 0.0)
+        code = linalg.materialize(code)
         dup = jnp.zeros(sel.shape, bool)
         merged = jnp.zeros(pr.shape, dtype)
         for j in range(T):

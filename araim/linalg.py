@@ -7,6 +7,7 @@ slower on CPU (DESIGN.md, performance notes). Loops below are Python loops over 
 matrix size, unrolled at trace time.
 """
 
+import jax
 import jax.numpy as jnp
 
 #: a pivot smaller than this fraction of the largest diagonal entry marks the matrix singular
@@ -15,6 +16,28 @@ import jax.numpy as jnp
 #: tolerance relative to each column's own diagonal would accept a column that is pure rounding
 #: noise (e.g. east = -cos(el) sin(pi) ~ 1e-16 for azimuths all 0 or 180 deg).
 RELATIVE_PIVOT_TOLERANCE = 1e-10
+
+
+def unrolled(op):
+    """A reduction ``reduce(x, axis)`` over a short static axis written out as elementwise
+    ``op`` of its slices, in index order: XLA fuses and vectorises them over the trailing batch
+    axis, which it does not do for a reduce over a non-minor axis (measured: the MHSS
+    single-mode kernel ran 2.2x faster on CPU this way). An empty axis gives zeros."""
+    def reduce(x, axis):
+        if x.shape[axis] == 0:
+            return jnp.zeros(x.shape[:axis] + x.shape[axis + 1:], x.dtype)
+        out = jax.lax.index_in_dim(x, 0, axis, keepdims=False)
+        for m in range(1, x.shape[axis]):
+            out = op(out, jax.lax.index_in_dim(x, m, axis, keepdims=False))
+        return out
+    return reduce
+
+
+sum_axis = unrolled(jnp.add)
+max_axis = unrolled(jnp.maximum)
+min_axis = unrolled(jnp.minimum)
+any_axis = unrolled(jnp.logical_or)
+prod_axis = unrolled(jnp.multiply)
 
 
 def materialize(x):

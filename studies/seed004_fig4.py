@@ -123,7 +123,7 @@ class Fig4Cell:
         self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
                      params["p_const_sop"], params["d_min_m"], params["d_max_m"],
                      params["h_min_m"], params["h_max_m"])
-        self.fault_modes = params.get("fault_modes", c.FAULT_MODES)
+        self.fault_modes = params["fault_modes"]
         self.max_order = c.order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
                                      params["p_const_sop"], self.fault_modes)
 

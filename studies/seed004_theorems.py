@@ -140,7 +140,7 @@ def theorem_kernel(keys, n_gps, fault_modes=c.FAULT_MODES):
 class TheoremCell:
     def __init__(self, params, coords):
         self.n_gps = int(coords["n_gps"])
-        self.fault_modes = params.get("fault_modes", c.FAULT_MODES)
+        self.fault_modes = params["fault_modes"]
 
     def __call__(self, keys):
         return theorem_kernel(keys, self.n_gps, self.fault_modes)
