@@ -21,6 +21,7 @@ from oaraim.araim.fault_modes import CONVENTIONS as FAULT_MODE_CONVENTIONS
 from oaraim.araim.fault_modes import FaultModeRule
 from oaraim.araim.fde import FDEResult, Separation, detect_and_exclude, solution_separation
 from oaraim.araim.mhss import MHSSResult, protection_levels
+from oaraim.araim.position_opt import PositionOptimization
 from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slopes
 from oaraim.araim.status import Status
 from oaraim.araim.wnls import WNLSResult, wnls
@@ -34,6 +35,7 @@ __all__ = [
     "FaultModeRule",
     "IntegrityBudget",
     "MHSSResult",
+    "PositionOptimization",
     "Separation",
     "detect_and_exclude",
     "error_models",

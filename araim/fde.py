@@ -80,7 +80,7 @@ def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, 
     ok = status == Status.OK
     res = MHSSResult(jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), pl[2], emt,
                      jnp.where(ok, pr.sigma_acc_u, jnp.inf), pr.n_modes, pr.p_not_monitored,
-                     status, pr.order, pl)
+                     status, pr.order, pl, jnp.zeros_like(detected))
     b = (g.shape[0],)
     return Separation(
         to_batch_first(sep, b), to_batch_first(pr.threshold, b), to_batch_first(tau, b),

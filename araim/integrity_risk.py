@@ -659,6 +659,16 @@ def allocated_budget(budget: IntegrityBudget, p_not_monitored):
     return budget.phmi_h * scale, budget.phmi_v * scale
 
 
+def total_risk(risk, p_not_monitored, budget):
+    """(risk + P_NM x PHMI_d / (PHMI_V + PHMI_H), PHMI_d / N_es): the measured risk of the
+    monitored modes with every unmonitored mode counted as HMI, and the whole budget, per
+    direction (..., 2). Their ratio is <= 1 exactly where risk <= ``allocated_budget``."""
+    share = np.array([budget.phmi_h, budget.phmi_v]) / (budget.phmi_v + budget.phmi_h)
+    phmi = np.array([budget.phmi_h, budget.phmi_v]) / budget.n_es_int
+    return (np.asarray(risk) + np.asarray(p_not_monitored)[..., None] * share / budget.n_es_int,
+            phmi)
+
+
 def measured_risk(table: RiskTable, include_wrong_exclusion=False):
     """Measured integrity risk of one geometry per direction (module docstring): returns
     (risk (2,), upper (2,), per-scenario worst conditional P(HMI) (S, 2), arg max over x

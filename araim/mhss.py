@@ -58,6 +58,7 @@ from oaraim.araim.fault_modes import (
     to_batch_first,
     to_batch_last,
 )
+from oaraim.araim.position_opt import adjusted_rows, check_position_optimization
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 
@@ -165,6 +166,8 @@ class MHSSResult(NamedTuple):
     status: jax.Array  # (...) Status
     order: jax.Array  # (...) number of simultaneous faulty constellations monitored
     pl_enu_m: jax.Array  # (..., 3) PL_1, PL_2, PL_3
+    position_adjusted: jax.Array  # (...) bool: the PLs are those of the Blanch et al. (2015)
+    #                               estimator (``position_optimization``), not of the WLS one
 
 
 class Projection(NamedTuple):
@@ -468,6 +471,44 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
     return (pr, flags) if input_flags else pr
 
 
+def _k_fa(n_modes, K, budget, dtype):
+    """K_fa (3, B) of eq. (12) for N_f = n_modes (B,). A table over N_f = 0..K (N_f = 0 read
+    as 1), evaluated on the host (an ndtri per geometry and direction was 2 % of the kernel)."""
+    nf = np.maximum(np.arange(K + 1), 1)
+    pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
+    k_h = jnp.take(jnp.asarray(-special.ndtri(pfa_h / (4.0 * nf)), dtype), n_modes)
+    k_v = jnp.take(jnp.asarray(-special.ndtri(pfa_v / (2.0 * nf)), dtype), n_modes)
+    return linalg.materialize(jnp.stack([k_h, k_h, k_v], axis=0))
+
+
+def _adjusted_projection(pr, var_int, var_acc, b_nom, valid, budget, opt):
+    """The Projection of the Blanch et al. (2015) all-in-view estimator
+    (``araim.position_opt``): mode 0's row, sigma, bias and sigma_acc and every mode's
+    separation and threshold from the moved rows; the modes, priors and P_NM unchanged.
+    var_int, var_acc, b_nom, valid: the kernel's batch-last (L, B) inputs."""
+    var_int = jnp.where(valid, var_int, 0.0)
+    var_acc = jnp.where(valid, var_acc, 0.0)
+    b_nom = jnp.where(valid, b_nom, 0.0)
+    s_opt, _ = adjusted_rows(pr.s_pos, pr.sigma, pr.prior, pr.monitored, var_acc,
+                             opt.sigma_acc_max_m, opt.prior_min)
+    aiv_ok = pr.status != Status.SINGULAR_GEOMETRY
+    s_opt = jnp.where(aiv_ok[None, None], s_opt, pr.s_pos[0])
+    sigma0 = jnp.sqrt(_sum(s_opt ** 2 * var_int[None], 1))  # (3, B)
+    sigma0 = jnp.where(aiv_ok[None], sigma0, pr.sigma[0])
+    bias0 = _sum(jnp.abs(s_opt) * b_nom[None], 1)
+    ss2 = 0.0
+    for m in range(valid.shape[0]):
+        ss2 = ss2 + (pr.s_pos[:, :, m] - s_opt[None, :, m]) ** 2 * var_acc[m]
+    sigma_ss = jnp.where(pr.monitored[:, None], jnp.sqrt(ss2), 0.0)
+    sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma0[None], 0.0, sigma_ss)
+    k_fa = _k_fa(pr.n_modes, pr.monitored.shape[0], budget, var_acc.dtype)
+    threshold = jnp.where(pr.monitored[:, None], k_fa[None] * sigma_ss, 0.0)
+    sigma_acc_u = jnp.sqrt(_sum(s_opt[2] ** 2 * var_acc, 0))
+    return pr._replace(s_pos=pr.s_pos.at[0].set(s_opt), sigma=pr.sigma.at[0].set(sigma0),
+                       bias=pr.bias.at[0].set(bias0), sigma_ss=sigma_ss, threshold=threshold,
+                       sigma_acc_u=sigma_acc_u)
+
+
 def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc, budget,
             dtype):
     """Thresholds (eq. 12), priors, P_nm and status from the per-mode quantities."""
@@ -488,13 +529,7 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
     sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma[:1], 0.0, sigma_ss)
 
     n_modes = jnp.sum(monitored, axis=0)
-    # K_fa depends on N_f only: a table over N_f = 0..K (N_f = 0 read as 1), evaluated on the
-    # host (an ndtri per geometry and direction was 2 % of the kernel)
-    nf = np.maximum(np.arange(monitored.shape[0] + 1), 1)
-    pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
-    k_h = jnp.take(jnp.asarray(-special.ndtri(pfa_h / (4.0 * nf)), dtype), n_modes)
-    k_v = jnp.take(jnp.asarray(-special.ndtri(pfa_v / (2.0 * nf)), dtype), n_modes)
-    k_fa = linalg.materialize(jnp.stack([k_h, k_h, k_v], axis=0))  # (3, B)
+    k_fa = _k_fa(n_modes, monitored.shape[0], budget, dtype)
     threshold = jnp.where(monitored[:, None, :], k_fa[None] * sigma_ss, 0.0)
 
     prior = jnp.where(monitored, prior_all, 0.0)
@@ -952,9 +987,43 @@ def _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
             tl(p_sat, 1), tl(p_const, 1), tl(valid, 1))
 
 
+def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
+    """MAAST's use of the Blanch et al. (2015) estimator (``usr_vhpl_araim.m``): tried where
+    the baseline is computed, sigma_acc,U < its limit and VPL, HPL or EMT exceeds its target;
+    kept (PLs, EMT and sigma_acc together) where its VPL or HPL is lower. Returns (pl,
+    status, emt, sigma_acc_u, adjusted). Chunks where no geometry triggers skip the second
+    solve (``lax.cond``)."""
+    ok = status == Status.OK
+    hpl = jnp.sqrt(pl[0] ** 2 + pl[1] ** 2)
+    if opt.keep == "always":
+        trigger = ok
+    else:
+        trigger = ok & (pr.sigma_acc_u < opt.sigma_acc_max_m[2]) & (
+            (pl[2] > opt.vpl_target_m) | (hpl > opt.hpl_target_m) | (emt > opt.emt_target_m))
+
+    def adjusted(_):
+        pr2 = _adjusted_projection(pr, args[2], args[3], args[4], args[7], budget, opt)
+        pr2 = pr2._replace(status=jnp.where(trigger, pr2.status, Status.NOT_CONVERGED)
+                           .astype(pr2.status.dtype))  # untriggered: not solved
+        pl2, status2, emt2 = _pls_from_projection(pr2, budget, iterations)
+        hpl2 = jnp.sqrt(pl2[0] ** 2 + pl2[1] ** 2)
+        take = trigger & (status2 == Status.OK)
+        if opt.keep == "lower":
+            take = take & ((pl2[2] < pl[2]) | (hpl2 < hpl))
+        return (jnp.where(take[None], pl2, pl), jnp.where(take, emt2, emt),
+                jnp.where(take, pr2.sigma_acc_u, pr.sigma_acc_u), take)
+
+    def baseline(_):
+        return pl, emt, pr.sigma_acc_u, jnp.zeros_like(trigger)
+
+    pl, emt, sigma_acc_u, take = jax.lax.cond(jnp.any(trigger), adjusted, baseline, None)
+    return pl, status, emt, sigma_acc_u, take
+
+
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                             budget, max_order, all_in_view_weighting, iterations,
-                            input_flags=False, fault_modes=DEFAULT_RULE):
+                            input_flags=False, fault_modes=DEFAULT_RULE,
+                            position_optimization=None):
     """One flat batch (B, ...) in and out; batch-last inside. ``input_flags``: returns
     (MHSSResult, ``_input_flags``)."""
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
@@ -963,18 +1032,25 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
     if input_flags:
         pr, flags = pr
     pl, status, emt = _pls_from_projection(pr, budget, iterations)
+    sigma_acc_u = pr.sigma_acc_u
+    adjusted = jnp.zeros_like(status, dtype=bool)
+    if position_optimization is not None:
+        pl, status, emt, sigma_acc_u, adjusted = _optimized_position(
+            pr, pl, status, emt, args, budget, iterations, position_optimization)
     ok = status == Status.OK
     out = MHSSResult(
         hpl_m=jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), vpl_m=pl[2], emt_m=emt,
-        sigma_acc_u_m=jnp.where(ok, pr.sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
-        p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl)
+        sigma_acc_u_m=jnp.where(ok, sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
+        p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl,
+        position_adjusted=adjusted)
     out = MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
     return (out, flags) if input_flags else out
 
 
 def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                        budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS,
-                       input_flags=False, fault_modes=DEFAULT_RULE):
+                       input_flags=False, fault_modes=DEFAULT_RULE,
+                       position_optimization=None):
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
     cache-sized chunks (``araim.batching``). ``input_flags`` also returns ``_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
@@ -986,23 +1062,25 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
 
     def kernel(*xs):
         return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
-                                       iterations, input_flags, fault_modes)
+                                       iterations, input_flags, fault_modes,
+                                       position_optimization)
 
     return map_chunks(kernel, arrays, batch)
 
 
 _STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags",
-           "fault_modes")
+           "fault_modes", "position_optimization")
 _protection_levels_jit = jit_kernel(_protection_levels, static_argnames=_STATIC)
 
 
 def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_weighting="int",
                             iterations=PL_ITERATIONS, input_flags=False,
-                            fault_modes=DEFAULT_RULE):
+                            fault_modes=DEFAULT_RULE, position_optimization=None):
     """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
     program (``araim.batching.map_threads``'s ``part_fn``)."""
     return _protection_levels(*slice_rows(args, start, size), budget, max_order,
-                              all_in_view_weighting, iterations, input_flags, fault_modes)
+                              all_in_view_weighting, iterations, input_flags, fault_modes,
+                              position_optimization)
 
 
 _protection_levels_part_jit = jit_kernel(_protection_levels_part,
@@ -1184,7 +1262,7 @@ def _worst_tails(valid, constellation, p_sat, p_const, r_max):
 
 def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                       budget, valid=None, *, max_order=None, all_in_view_weighting="int",
-                      threads=None, fault_modes=None):
+                      threads=None, fault_modes=None, position_optimization=None):
     """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
 
     Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int
@@ -1211,6 +1289,10 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
       fault_modes: the fault-mode convention, a name or ``araim.FaultModeRule``: ``add-v4.2``
         (default, the current ADD), ``add-v3``, ``add-v3-consolidated``, ``blanch-2012``,
         ``grouped`` (docs/conformance.md).
+      position_optimization: None (default: the weighted least-squares all-in-view estimate)
+        or an ``araim.PositionOptimization``: where the baseline misses a target, the
+        all-in-view estimator of Blanch et al. (2015) as MAAST applies it
+        (``araim.position_opt``); ``position_adjusted`` says where it was kept.
 
     Returns:
       ``MHSSResult``; every PL is inf where status != OK, never NaN.
@@ -1222,6 +1304,7 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
         raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
                          "araim.BUDGET_SEED004_TABLE_I")
     rule = fault_mode_rule(fault_modes)
+    opt = check_position_optimization(position_optimization)
     if max_order is not None:
         max_order = check_order(rule, check_int("max_order", max_order, 1))
     if threads is not None:
@@ -1235,9 +1318,11 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
         max_order = required_order(args[7], args[1], args[5], args[6], budget,
                                    fault_modes=rule)
         return protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                          threads, fault_modes=rule)
+                                          threads, fault_modes=rule,
+                                          position_optimization=opt)
     res, flags = protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                            threads, input_flags=True, fault_modes=rule)
+                                            threads, input_flags=True, fault_modes=rule,
+                                            position_optimization=opt)
     try:
         flagged = bool(np.any(np.asarray(flags)))
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
@@ -1250,13 +1335,15 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
 
 
 def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="int",
-                               threads=None, input_flags=False, fault_modes=DEFAULT_RULE):
+                               threads=None, input_flags=False, fault_modes=DEFAULT_RULE,
+                               position_optimization=None):
     """The jitted kernel on ``prepare_inputs`` output, large batches split over host threads
     (``araim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores).
     ``input_flags``: returns (MHSSResult, ``_input_flags``)."""
     static = dict(budget=budget, max_order=max_order,
                   all_in_view_weighting=all_in_view_weighting, input_flags=input_flags,
-                  fault_modes=fault_mode_rule(fault_modes))
+                  fault_modes=fault_mode_rule(fault_modes),
+                  position_optimization=check_position_optimization(position_optimization))
 
     def fn(*xs):
         return _protection_levels_jit(*xs, **static)

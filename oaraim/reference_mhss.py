@@ -36,7 +36,7 @@ import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import special
+from scipy import optimize, special
 
 OK, TOO_FEW_SOURCES, SINGULAR_GEOMETRY, NOT_CONVERGED, UNMONITORED_RISK = 0, 1, 2, 4, 5
 
@@ -315,6 +315,7 @@ class Result:
     singular: list  # Mode of the candidate modes that are singular
     k_fa: np.ndarray  # (3,)
     borderline: bool = False  # some mode's (or the all-in-view) singularity test is borderline
+    position_adjusted: bool = False  # PLs of the Blanch et al. (2015) estimator
 
 
 def _solution(g, constellation, kept, var_int, b_nom, mode, singular_rtol):
@@ -355,11 +356,13 @@ def solve_pl(prior_fault_free, sigma0, bias0, priors, sigmas, offsets, rhs):
 
 def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
                                 budget, valid=None, max_order=3, singular_rtol=SINGULAR_RTOL,
-                                fault_modes="grouped"):
+                                fault_modes="grouped", position_optimization=None):
     """Seed 004 eqs. (8)-(16) for ONE geometry; arguments as ``araim.protection_levels`` without
     batch axes: g (L, 3), constellation/var_int/var_acc/b_nom/p_sat/valid (L,), p_const (C,).
     ``fault_modes``: "grouped" (``fault_mode_set``) or one of ``EVENT_RULES``
-    (``event_fault_mode_set``, max_order at most 2)."""
+    (``event_fault_mode_set``, max_order at most 2). ``position_optimization``: None or an
+    ``araim.PositionOptimization`` (``adjusted_estimator``; the result's ``position_adjusted``
+    says whether its PLs are the adjusted estimator's)."""
     g = np.asarray(g, float)
     L = g.shape[0]
     valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
@@ -414,6 +417,28 @@ def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat
     for sol in monitored:
         sol.threshold = k_fa * sol.sigma_ss
 
+    res = _levels(aiv, monitored, k_fa, p_nm, var_acc, budget)
+    res = Result(*res[:4], n_f, float(p_nm), OK, fm.order, res[4], fm, aiv, monitored,
+                 singular, k_fa, borderline)
+    opt = position_optimization
+    if opt is None:
+        return res
+    triggered = opt.keep == "always" or (res.sigma_acc_u_m < opt.sigma_acc_max_m[2] and (
+        res.vpl_m > opt.vpl_target_m or res.hpl_m > opt.hpl_target_m
+        or res.emt_m > opt.emt_target_m))
+    if not triggered:
+        return res
+    aiv2, monitored2 = adjusted_estimator(aiv, monitored, var_int, var_acc, b_nom, k_fa, opt)
+    adj = _levels(aiv2, monitored2, k_fa, p_nm, var_acc, budget)
+    if opt.keep == "lower" and not (adj[1] < res.vpl_m or adj[0] < res.hpl_m):
+        return res
+    return Result(*adj[:4], n_f, float(p_nm), OK, fm.order, adj[4], fm, aiv2, monitored2, singular,
+                  k_fa, borderline, position_adjusted=True)
+
+
+def _levels(aiv, monitored, k_fa, p_nm, var_acc, budget):
+    """(HPL, VPL, EMT, sigma_acc_U, PL_ENU) of an all-in-view solution and its monitored modes
+    (thresholds set)."""
     scale = (1.0 - p_nm / (budget.phmi_v + budget.phmi_h)) / budget.n_es_int
     rhs = np.array([budget.phmi_h / 2, budget.phmi_h / 2, budget.phmi_v]) * scale
     priors = np.array([m.mode.prior for m in monitored])
@@ -423,11 +448,44 @@ def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat
             2.0, aiv.sigma[q], aiv.bias[q], priors,
             np.array([m.sigma[q] for m in monitored]),
             np.array([m.threshold[q] + m.bias[q] for m in monitored]), rhs[q])
-
     emt = max([m.threshold[2] for m in monitored if m.mode.prior >= budget.p_emt], default=0.0)
     sigma_acc_u = float(np.sqrt(aiv.s_pos[2] ** 2 @ var_acc))
-    return Result(float(np.hypot(pl[0], pl[1])), float(pl[2]), float(emt), sigma_acc_u, n_f,
-                  float(p_nm), OK, fm.order, pl, fm, aiv, monitored, singular, k_fa, borderline)
+    return float(np.hypot(pl[0], pl[1])), float(pl[2]), float(emt), sigma_acc_u, pl
+
+
+def adjusted_estimator(aiv, monitored, var_int, var_acc, b_nom, k_fa, opt):
+    """Blanch et al. (2015) (``araim.position_opt``), per axis q: the all-in-view row moved
+    toward the row of the monitored mode (prior >= opt.prior_min) with the largest sigma_q, by
+    the largest t in [0, 1] at which its accuracy sigma stays at most sigma_acc_max_q - 1e-5 m
+    (found by bracketing the convex sigma_acc(t)^2 with brentq, not by the quadratic formula).
+    Returns the new all-in-view ModeSolution and copies of the monitored ones with separations
+    and thresholds from it."""
+    rows = aiv.s_pos.copy()
+    for q in range(3):
+        cands = [m for m in monitored if m.mode.prior >= opt.prior_min]
+        if not cands:
+            continue
+        weak = max(cands, key=lambda m: m.sigma[q])
+        d = weak.s_pos[q] - aiv.s_pos[q]
+        limit2 = (opt.sigma_acc_max_m[q] - 1e-5) ** 2
+
+        def excess(t, q=q, d=d, limit2=limit2):
+            return float((aiv.s_pos[q] + t * d) ** 2 @ var_acc) - limit2
+
+        if excess(0.0) >= 0 or not np.any(d):
+            t = 0.0
+        elif excess(1.0) <= 0:
+            t = 1.0
+        else:
+            t = optimize.brentq(excess, 0.0, 1.0, xtol=1e-15, rtol=1e-15)
+        rows[q] = aiv.s_pos[q] + t * d
+    aiv2 = ModeSolution(None, rows, np.sqrt(rows**2 @ var_int), np.abs(rows) @ b_nom)
+    out = []
+    for m in monitored:
+        ss = np.sqrt((m.s_pos - rows) ** 2 @ var_acc)
+        ss[ss <= ZERO_SS_RTOL * aiv2.sigma] = 0.0
+        out.append(ModeSolution(m.mode, m.s_pos, m.sigma, m.bias, ss, k_fa * ss))
+    return aiv2, out
 
 
 def pl_equation(res, budget, q, pl):

@@ -39,6 +39,7 @@ from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import _protection_levels, required_order
+from oaraim.araim.position_opt import PositionOptimization
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
 from oaraim.geometry.sky import look_angles, resolve_source
 from oaraim.mc.sweep import Values
@@ -291,10 +292,11 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 
 @functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
                                                 "budget", "requirements", "fault_modes",
-                                                "airborne_model"))
+                                                "airborne_model", "position_optimization"))
 def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
                gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-               requirements, fault_modes="add-v4.2", airborne_model="add"):
+               requirements, fault_modes="add-v4.2", airborne_model="add",
+               position_optimization=None):
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
@@ -340,17 +342,20 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
                             -2)
     r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
                            x["p_sat"], p_const, x["valid"], budget=budget, max_order=max_order,
-                           fault_modes=fault_mode_rule(fault_modes))
+                           fault_modes=fault_mode_rule(fault_modes),
+                           position_optimization=position_optimization)
     ok = av.available(r.hpl_m, r.vpl_m, r.emt_m, r.sigma_acc_u_m, r.status, requirements)
     return {"hpl_m": r.hpl_m, "vpl_m": r.vpl_m, "emt_m": r.emt_m,
             "sigma_acc_m": r.sigma_acc_u_m, "status": r.status.astype(jnp.int8),
+            "position_adjusted": r.position_adjusted,
             "n_gnss": jnp.sum(vis, -1).astype(jnp.int16),
             "n_sops": jnp.sum(x["valid"][:, n_slots:], -1).astype(jnp.int16),
             "available": ok}
 
 
 OUTPUTS = {"hpl_m": "float64", "vpl_m": "float64", "emt_m": "float64", "sigma_acc_m": "float64",
-           "status": STATUS_DTYPE, "n_gnss": "int16", "n_sops": "int16", "available": "bool"}
+           "status": STATUS_DTYPE, "position_adjusted": "bool", "n_gnss": "int16",
+           "n_sops": "int16", "available": "bool"}
 
 
 class MapRow:
@@ -376,7 +381,8 @@ class MapRow:
         self.static = dict(n_slots=lay["n_slots"], n_sops=lay["n_sops"], bpp=lay["bpp"],
                            max_order=lay["max_order"], budget=lay["level"].budget,
                            requirements=lay["requirements"], fault_modes=p["fault_modes"],
-                           airborne_model=p["airborne_model"])
+                           airborne_model=p["airborne_model"],
+                           position_optimization=lay["position_optimization"])
         self.p_const = jnp.asarray(lay["p_const"])
         self.towers = None
         if p["towers"] != "none":
@@ -426,6 +432,8 @@ def _layout(key):
         jnp.asarray([p_const]), level.budget, cap=2, fault_modes=p["fault_modes"]))
     target = level.target if p["target"] == "preset" else float(p["target"])
     return {"level": level, "requirements": req, "target": target, "n_slots": n_slots,
+            "position_optimization": position_optimization(p["position_opt"], p["preset"],
+                                                           req),
             "n_sops": n_sops, "bpp": bpp, "p_const": np.asarray(p_const), "max_order": max_order,
             "n_carriers": n_carriers}
 
@@ -434,6 +442,26 @@ def layout(params):
     """Static shapes and constants of a run: GNSS and SOP slots, P_const per constellation,
     the MHSS order, the service level and its requirements (cached per parameters)."""
     return _layout(tuple(sorted((k, v) for k, v in params.items() if k != "chunk")))
+
+
+#: ``position_opt``: the all-in-view estimator
+POSITION_OPTS = ("maast", "none")
+#: MAAST's sigma_acc limits of the estimator (east, north, up) per service level
+#: (``main_maast_araim.m``: sig_acc_max_hor1/hor2/vert, LPV-200 3/3/1.86 m, H-ARAIM 60/60/10 m)
+ESTIMATOR_SIGMA_ACC_MAX_M = {"lpv200": (3.0, 3.0, 1.86), "lpv200-add": (3.0, 3.0, 1.86),
+                             "h-araim": (60.0, 60.0, 10.0)}
+
+
+def position_optimization(name, preset, requirements):
+    """``araim.PositionOptimization`` of ``position_opt`` (None for "none"): MAAST's trigger
+    targets are the service level's VAL, HAL and EMT limits (its prm.vpl_target, hpl_target,
+    emt_target equal vhal's in both presets)."""
+    if name == "none":
+        return None
+    return PositionOptimization(sigma_acc_max_m=ESTIMATOR_SIGMA_ACC_MAX_M[preset],
+                                vpl_target_m=float(requirements.val_m),
+                                hpl_target_m=float(requirements.hal_m),
+                                emt_target_m=float(requirements.emt_m))
 
 
 # ------------------------------------------------------------------------------------ study
@@ -518,6 +546,11 @@ class AvailabilityMap(SweepStudy):
         "airborne_model": _p("add", parse_choice(*AIRBORNE_MODELS), "airborne error model: "
                              "add (the ADD's dual-frequency curve, MAAST 2018) or ed259a "
                              "(EUROCAE ED-259A, MAAST 2024)"),
+        "position_opt": _p("maast", parse_choice(*POSITION_OPTS), "all-in-view estimator: "
+                           "maast (MAAST's prm.opt = 1: where VPL, HPL or EMT misses its limit, "
+                           "the estimator of Blanch et al. 2015, kept where it lowers VPL or "
+                           "HPL) or none (weighted least squares throughout, the ADD "
+                           "baseline)"),
         "mask_deg": _p(MAAST_DEFAULTS["mask_deg"], in_range(0.0, 89.0),
                        "elevation mask (MAAST/ADD: 5 deg)", "deg"),
         "sigma_ura_gps_m": _p(MAAST_DEFAULTS["sigma_ura_gps_m"], positive,
@@ -639,6 +672,9 @@ class AvailabilityMap(SweepStudy):
             "gnss_slots": lay["n_slots"], "sop_slots": lay["n_sops"],
             "mhss_max_order": lay["max_order"],
             "fault_modes": params["fault_modes"],
+            "position_opt": params["position_opt"],
+            "epochs_position_adjusted_pct": 100.0 * float(np.mean(
+                cube["position_adjusted"][1])),
             "service_level": lay["level"].name,
             "requirements_m": {k: (None if np.isinf(v) else v)
                                for k, v in req._asdict().items()},
@@ -659,7 +695,8 @@ class AvailabilityMap(SweepStudy):
                                   for k, v in req._asdict().items()})
         return StudyResult(out, rows, metrics, {"sky_source": sky_desc,
                                                  "service_level": lay["level"].name,
-                                                 "fault_modes": params["fault_modes"]})
+                                                 "fault_modes": params["fault_modes"],
+                                                 "position_opt": params["position_opt"]})
 
     def plot(self, out_dir):
         import matplotlib.pyplot as plt

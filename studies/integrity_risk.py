@@ -344,6 +344,13 @@ class IntegrityRisk(SweepStudy):
         alloc = np.stack(ir.allocated_budget(c.BUDGET, p_nm), axis=-1)  # (cells, G, 2)
         ratio = np.where(ok[..., None], risk / alloc, np.nan)
         ratio_up = np.where(ok[..., None], upper / alloc, np.nan)
+        # every unmonitored mode counted as HMI with certainty: its prior joins the risk, in
+        # each direction in the share the PL equations give it (P_NM PHMI_d / (PHMI_V +
+        # PHMI_H)), against the whole PHMI_d; <= 1 exactly when measured <= allocated
+        total, phmi = ir.total_risk(risk, p_nm, c.BUDGET)
+        total_up, _ = ir.total_risk(upper, p_nm, c.BUDGET)
+        ratio_total = np.where(ok[..., None], total / phmi, np.nan)
+        ratio_total_up = np.where(ok[..., None], total_up / phmi, np.nan)
         rows, metrics = [], {}
         for ci, n in enumerate(n_sops):
             tag = "without SOPs" if n == 0 else f"with {n} SOPs"
@@ -364,7 +371,24 @@ class IntegrityRisk(SweepStudy):
                     "share_upper95_within_budget": float(np.mean(ru <= 1.0))}
                 metrics[f"measured_risk_{d}_n{n}_median"] = float(np.median(
                     risk[ci, :, j][ok[ci]]))
+                t, tu = ratio_total[ci, :, j][ok[ci]], ratio_total_up[ci, :, j][ok[ci]]
+                rows.append({"quantity": f"(measured + unmonitored) / PHMI, {word}, {tag}: "
+                             "largest over geometries", "unit": "", "published": 1.0,
+                             "reproduced": float(np.max(t)),
+                             "note": f"every unmonitored mode's prior counted as HMI "
+                             f"(P_NM median {np.median(p_nm[ci][ok[ci]]):.3g}, its share "
+                             f"PHMI_d / (PHMI_V + PHMI_H)); median {np.median(t):.3g}, 95 % "
+                             f"upper bound at most {np.max(tu):.3g}; fault modes "
+                             f"{params['fault_modes']}"})
+                metrics[f"total_risk_ratio_{d}_n{n}"] = {
+                    "median": float(np.median(t)), "max": float(np.max(t)),
+                    "max_upper95": float(np.max(tu))}
             metrics[f"available_share_n{n}"] = float(np.mean(ok[ci]))
+            if ok[ci].any():
+                metrics[f"p_not_monitored_n{n}"] = {
+                    "median": float(np.median(p_nm[ci][ok[ci]])),
+                    "max": float(np.max(p_nm[ci][ok[ci]]))}
+        metrics["fault_modes"] = params["fault_modes"]
         metrics["allocated_h"] = float(np.median(alloc[..., 0]))
         metrics["allocated_v"] = float(np.median(alloc[..., 1]))
         # importance-sampling efficiency at the Table I levels: crude samples for the same

@@ -149,6 +149,7 @@ def test_every_pl_matches_the_numpy_oracle(small):
                                                           p["duration_s"], p["step_s"],
                                                           p["sky_time"])
     worst = 0.0
+    adjusted = 0
     for i, la in enumerate(ds["lat_deg"].values):
         for j, lo in enumerate(ds["lon_deg"].values):
             rx = np.asarray(geometry.geodetic_to_ecef(np.deg2rad(la), np.deg2rad(lo), 0.0))
@@ -169,16 +170,44 @@ def test_every_pl_matches_the_numpy_oracle(small):
                     np.where(gal, p["b_nom_gal_m"], p["b_nom_gps_m"]),
                     np.where(gal, p["p_sat_gal"], p["p_sat_gps"]), lay["p_const"],
                     lay["level"].budget, max_order=lay["max_order"],
-                    fault_modes=p["fault_modes"])
+                    fault_modes=p["fault_modes"],
+                    position_optimization=lay["position_optimization"])
                 got = [ds[n].values[i, j, k] for n in ("hpl_m", "vpl_m", "emt_m",
                                                        "sigma_acc_m")]
                 want = [ref.hpl_m, ref.vpl_m, ref.emt_m, ref.sigma_acc_u_m]
                 assert ds["status"].values[i, j, k] == ref.status
+                assert bool(ds["position_adjusted"].values[i, j, k]) == ref.position_adjusted
+                adjusted += ref.position_adjusted
                 np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
                 worst = max(worst, float(np.max(np.abs(np.subtract(got, want)))))
                 a = av.available(*got, ref.status, lay["requirements"])
                 assert bool(ds["available"].values[i, j, k]) == bool(a)
     assert worst < 1e-5
+
+
+def test_position_opt_replaces_the_baseline_only_where_it_helps(small):
+    """``position_opt=maast`` against ``none`` with a VAL of 18 m (MAAST's trigger follows the
+    limits, so most epochs try the estimator): where adjusted, the VPL or the HPL is lower
+    and sigma_acc has moved up to its 1.86 m limit; elsewhere the cube is the baseline's, and
+    the default map's cube agrees with ``none`` wherever it was not adjusted."""
+    p, res = small
+    over = dict(SMALL, val_m="18")
+    runs = [STUDY.validate(over), STUDY.validate(dict(over, position_opt="none"))]
+    opt, base = (STUDY.run(q, STUDY.fixed_realizations(q), 0).dataset for q in runs)
+    adj = opt["position_adjusted"].values
+    assert 0 < adj.sum() < adj.size, adj.sum()
+    assert not base["position_adjusted"].values.any()
+    lower = ((opt["vpl_m"].values < base["vpl_m"].values)
+             | (opt["hpl_m"].values < base["hpl_m"].values))
+    np.testing.assert_array_equal(lower[adj], True)
+    assert np.all(opt["sigma_acc_m"].values[adj] <= 1.86)
+    assert np.all(opt["sigma_acc_m"].values[adj] > base["sigma_acc_m"].values[adj])
+    for k in ("vpl_m", "hpl_m", "emt_m", "sigma_acc_m"):
+        np.testing.assert_array_equal(opt[k].values[~adj], base[k].values[~adj])
+    d = res.dataset
+    keep = ~d["position_adjusted"].values
+    np.testing.assert_array_equal(d["vpl_m"].values[keep], base["vpl_m"].values[keep])
+    assert res.metrics["position_opt"] == "maast"
 
 
 def test_maps_and_summary_follow_from_the_cube(small):

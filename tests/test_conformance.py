@@ -301,3 +301,107 @@ def test_add_v42_matches_maast_for_araim_2():
         assert res["sigma_acc_u_m"] == pytest.approx(r["sigma_acc_m"], abs=1e-5)
         for key in ("vpl_m", "hpl_m"):
             assert res[key] - 1e-4 <= r[key] <= res[key] + 0.45, (r, key, res[key])
+
+
+# ------------------------------------------------- the Blanch et al. (2015) position estimator
+
+OPT_ALWAYS = araim.PositionOptimization(keep="always")
+
+
+@pytest.mark.parametrize("opt", [OPT_ALWAYS, araim.PositionOptimization(vpl_target_m=20.0)])
+def test_position_optimization_matches_the_oracle(event_cases, opt):
+    """Issue 28 item 7: the kernel's adjusted estimator against the oracle's (which finds t by
+    brentq instead of the quadratic formula) on the random GPS + Galileo / GPS + SOP cases:
+    the same PLs, EMT and sigma_acc to 2e-3 m, the same keep decision; "always" moves the row
+    in most cases, the target 20 m triggers in some."""
+    g, const, vi, va, b, ps, pc, valid = event_cases
+    kw = dict(max_order=2, fault_modes="add-v4.2")
+    res = araim.protection_levels(g, const, vi, va, b, ps, pc, araim.BUDGET_LPV200, valid,
+                                  position_optimization=opt, **kw)
+    res = {k: np.asarray(v) for k, v in res._asdict().items()}
+    adjusted = compared = 0
+    for i in range(g.shape[0]):
+        o = ref.protection_levels_reference(g[i], const[i], vi[i], va[i], b[i], ps[i], pc[i],
+                                            araim.BUDGET_LPV200, valid[i],
+                                            position_optimization=opt, **kw)
+        if o.borderline or o.status != Status.OK:
+            continue
+        compared += 1
+        assert res["position_adjusted"][i] == o.position_adjusted, i
+        adjusted += o.position_adjusted
+        for key in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m"):
+            assert res[key][i] == pytest.approx(getattr(o, key), abs=2e-3), (i, key)
+    assert compared >= N_RANDOM // 4
+    assert adjusted >= (compared // 2 if opt.keep == "always" else 2), (adjusted, compared)
+
+
+def test_position_optimization_by_hand():
+    """Closed form: with C_acc = C_int the WLS row s0 is the BLUE, so s0 C (s_k - s0) = 0
+    (b = 0) and the accuracy sigma along the move is sqrt(sigma_acc^2 + t^2 sigma_ss,k^2): the
+    estimator stops where that reaches sigma_acc_max - 1e-5 m, t = sqrt(limit^2 -
+    sigma_acc^2) / sigma_ss of the weakest mode (largest sigma_U). Also: a limit below the
+    WLS sigma_acc leaves the vertical unchanged (t = 0)."""
+    L = 10
+    var = ADD_C_INT
+    args = (ADD_ROWS, ADD_CONST, var, var, np.full(L, ADD_B_NOM_M), np.full(L, 1e-5),
+            ADD_P_CONST)
+    base = ref.protection_levels_reference(*args, araim.BUDGET_LPV200, max_order=1,
+                                           fault_modes="add-v4.2")
+    weak = max((m for m in base.monitored if m.mode.prior >= 1e-11), key=lambda m: m.sigma[2])
+    limit = base.sigma_acc_u_m + 0.2
+    t = np.sqrt((limit - 1e-5) ** 2 - base.sigma_acc_u_m ** 2) / weak.sigma_ss[2]
+    assert 0 < t < 1
+    opt = araim.PositionOptimization(sigma_acc_max_m=(3.0, 3.0, limit), keep="always")
+    res = araim.protection_levels(*(a[None] for a in args), araim.BUDGET_LPV200,
+                                  fault_modes="add-v4.2", position_optimization=opt)
+    assert float(res.sigma_acc_u_m[0]) == pytest.approx(limit - 1e-5, abs=1e-9)
+    # the vertical separation of the weak mode shrinks by the factor (1 - t)
+    adj = ref.protection_levels_reference(*args, araim.BUDGET_LPV200, max_order=1,
+                                          fault_modes="add-v4.2", position_optimization=opt)
+    moved = next(m for m in adj.monitored if m.mode == weak.mode)
+    assert moved.sigma_ss[2] == pytest.approx((1 - t) * weak.sigma_ss[2], rel=1e-9)
+    tight = araim.PositionOptimization(sigma_acc_max_m=(3.0, 3.0, 1.0), keep="always")
+    res = araim.protection_levels(*(a[None] for a in args), araim.BUDGET_LPV200,
+                                  fault_modes="add-v4.2", position_optimization=tight)
+    assert float(res.sigma_acc_u_m[0]) == pytest.approx(base.sigma_acc_u_m, abs=1e-12)
+
+
+def test_position_optimization_matches_maast_for_araim_2():
+    """MAAST for ARAIM 2's ``prm.opt = 1`` (compute_adjusted_position_1D in
+    mhss_raim_baseline_v5, and usr_vhpl_araim's trigger and keep rule with its LPV-200 targets
+    35 / 40 / 15 m, sigma_acc limits 3 / 3 / 1.86 m), run under GNU Octave 7 by
+    tools/maast_v5_opt_reference.m on 8 subsets of the Appendix D geometry: the adjusted
+    estimator's sigma_acc and EMT to the printed digits, its PLs at or just above ours
+    (MAAST's bisection returns the upper end of its bracket, see the test above), and the
+    same result after MAAST's keep rule (4 of the 8 cases keep the adjusted estimator)."""
+    refs = json.loads((Path(__file__).parent / "data" /
+                       "maast_v5_opt_reference.json").read_text())
+    assert len(refs) == 8
+    rule = FaultModeRule("add-v4.2", fc_thres=0.01)
+    kept = 0
+    for r in refs:
+        valid = np.ones(10, bool)
+        valid[r["drop"]] = False  # dropped rows masked: one compiled shape for all cases
+        args = (ADD_ROWS, ADD_CONST, ADD_C_INT, ADD_C_ACC, np.full(10, ADD_B_NOM_M),
+                np.full(10, r["p_sat"]), ADD_P_CONST, valid)
+        for name, opt in (("adjusted", OPT_ALWAYS), ("maast", araim.PositionOptimization())):
+            res = araim.protection_levels(*(a[None] for a in args[:7]), araim.BUDGET_LPV200,
+                                          valid[None], max_order=2, fault_modes=rule,
+                                          position_optimization=opt)
+            want = r[name]
+            got = {k: float(np.asarray(getattr(res, k))[0])
+                   for k in ("vpl_m", "hpl_m", "sigma_acc_u_m", "emt_m")}
+            assert got["sigma_acc_u_m"] == pytest.approx(want["sigma_acc_m"], abs=1e-5), r
+            assert got["emt_m"] == pytest.approx(want["emt_m"], abs=1e-5), (r, name)
+            if name == "maast":
+                kept += bool(res.position_adjusted[0])
+            for key in ("vpl_m", "hpl_m"):
+                assert got[key] - 1e-4 <= want[key], (r, name, key)  # MAAST is conservative
+                if key == "vpl_m" and r["drop"] == [5] and r["p_sat"] == 1e-4:
+                    # MAAST's compute_protection_level_v5 bounds the modes with sigma within
+                    # 1.3 x the smallest by one term (largest sigma and threshold, summed
+                    # priors) and stops after 10 halvings: 41.8 m where the root is 31.5 m
+                    # (baseline) and 31.0 m (adjusted); the oracle's root agrees with ours
+                    continue
+                assert want[key] <= got[key] + 0.45, (r, name, key)
+    assert kept == 4

@@ -215,6 +215,25 @@ def test_pl_bounds_measured_risk_table_i(cases):
         assert not np.any(np.isnan(np.asarray(t.estimate.p_md)))
 
 
+def test_total_risk_counts_unmonitored_priors():
+    """By hand, Table I (PHMI_H 9.9e-8, PHMI_V 1e-9): a measured risk (4e-8, 5e-10) with P_NM
+    2e-8 adds 2e-8 x 0.99 and 2e-8 x 0.01 (the directions' shares of PHMI): (5.98e-8,
+    7e-10) of (9.9e-8, 1e-9); the ratio is <= 1 exactly where measured <= allocated, and it
+    fails (> 1) once the unmonitored prior alone exceeds the room left (P_NM 5e-8 with the
+    vertical risk 5e-10 gives 1.0 vertical, P_NM 6e-8 1.1)."""
+    b = araim.BUDGET_SEED004_TABLE_I
+    total, phmi = ir.total_risk(np.array([4e-8, 5e-10]), 2e-8, b)
+    np.testing.assert_allclose(total, [4e-8 + 2e-8 * 0.99, 5e-10 + 2e-8 * 0.01], rtol=1e-12)
+    np.testing.assert_allclose(phmi, [9.9e-8, 1e-9])
+    for p_nm in (2e-8, 4.9e-8, 5.1e-8, 6e-8):
+        total, phmi = ir.total_risk(np.array([4e-8, 5e-10]), p_nm, b)
+        alloc = np.array(ir.allocated_budget(b, p_nm))
+        np.testing.assert_array_equal(total <= phmi * (1 + 1e-12),
+                                      np.array([4e-8, 5e-10]) <= alloc * (1 + 1e-12))
+    total, phmi = ir.total_risk(np.array([4e-8, 5e-10]), 6e-8, b)
+    assert total[1] / phmi[1] == pytest.approx(1.1, rel=1e-9)
+
+
 def test_unavailable_geometry_has_no_risk_and_no_nan(cases):
     """Too few sources (status TOO_FEW_SOURCES, inf PLs): every scenario inactive, estimates
     0, no NaN (failures are data)."""
