@@ -12,6 +12,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -26,7 +27,7 @@ app.add_typer(data_app, name="data")
 
 
 def _fail(msg: str):
-    err.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
+    err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
 
 
@@ -37,17 +38,21 @@ def list_studies():
     from oaraim.studies.registry import STUDIES
 
     for name, s in STUDIES.items():
-        out.print(f"[bold]{name}[/]  {s.title}", highlight=False)
+        # the texts are printed literally (markup=False): a "[d_min_m, d_max_m]" in a help
+        # text is not Rich markup
+        out.print(f"[bold]{name}[/]  {escape(s.title)}", highlight=False)
         out.print(f"  one realization: {s.realization}; default {s.default_realizations:,}, "
-                  f"quick {s.quick_realizations:,}", highlight=False)
+                  f"quick {s.quick_realizations:,}", highlight=False, markup=False)
         if isinstance(s, SweepStudy):
             out.print(f"  sweep over {' x '.join(s.axis_names)} (--resume, --workers N, "
-                      "--scheduler ADDRESS); realizations are per cell", highlight=False)
+                      "--scheduler ADDRESS); realizations are per cell", highlight=False,
+                      markup=False)
         for key, p in s.params.items():
             unit = f" {p.unit}" if p.unit else ""
             default = (",".join(str(v) for v in p.default) if isinstance(p.default, tuple)
                        else p.default)
-            out.print(f"    --set {key}={default}{unit}  {p.doc}", highlight=False)
+            out.print(f"    --set {key}={default}{unit}  {p.doc}", highlight=False,
+                      markup=False)
 
 
 @app.command()
@@ -87,7 +92,7 @@ def _print_rows(summary):
         t.add_column(col)
     for r in summary["rows"]:
         pub = "-" if r["published"] is None else f"{r['published']:.4g}"
-        t.add_row(r["quantity"], r["unit"], pub, f"{r['reproduced']:.4g}")
+        t.add_row(escape(r["quantity"]), escape(r["unit"]), pub, f"{r['reproduced']:.4g}")
     out.print(t)
 
 
@@ -149,14 +154,15 @@ def reproduce(
             failures[name] = str(e)
     missing = check_data([f for n in names for f in needs.get(n, ())], progress=progress)
     for msg in missing.values():
-        err.print(f"[bold red]missing data:[/] {msg}", highlight=False, soft_wrap=True)
+        err.print(f"[bold red]missing data:[/] {escape(msg)}", highlight=False, soft_wrap=True)
     done = []
     for name in names:
         lost = [f for f in needs.get(name, ()) if f in missing]
         if lost:
             failures[name] = f"data file {', '.join(lost)} unavailable (see above)"
         if name in failures:
-            err.print(f"{name}: FAILED: {failures[name]}", highlight=False, soft_wrap=True)
+            err.print(f"{name}: FAILED: {escape(str(failures[name]))}", highlight=False,
+                      soft_wrap=True)
             continue
         try:
             summary, sdir, figures, wall = run_study(name, seed=seed, out=out_dir, quick=quick,
@@ -167,7 +173,8 @@ def reproduce(
             failures[name] = (f"{type(e).__name__}: {' '.join(str(e).split())} (rerun "
                               f"`oaraim run {name}` for the traceback)")
         if name in failures:
-            err.print(f"{name}: FAILED: {failures[name]}", highlight=False, soft_wrap=True)
+            err.print(f"{name}: FAILED: {escape(str(failures[name]))}", highlight=False,
+                      soft_wrap=True)
             continue
         done.append(name)
         err.print(f"{name}: {wall:.1f} s -> {sdir}", highlight=False)
@@ -190,7 +197,7 @@ def reproduce(
         err.print(f"[bold red]{len(failures)} of {len(names)} studies failed:[/]",
                   highlight=False)
         for name, msg in failures.items():
-            err.print(f"  {name}: {msg}", highlight=False, soft_wrap=True)
+            err.print(f"  {name}: {escape(str(msg))}", highlight=False, soft_wrap=True)
         raise typer.Exit(2)
 
 

@@ -57,6 +57,21 @@ def test_list_shows_studies_and_parameters():
     assert "seed001-fig3-elevation" in r.output and "--set p_md=0.001" in r.output
 
 
+def test_list_prints_every_help_text_literally():
+    """Issue 30: help texts are not Rich markup ("towers within [d_min_m, d_max_m] of a user"
+    lost its brackets): every study's title and every parameter's text appear verbatim
+    (whitespace folded, as the console wraps)."""
+    from oaraim.studies.registry import STUDIES
+
+    fold = lambda x: " ".join(x.split())  # noqa: E731
+    text = fold(_run("list").output)
+    assert "[d_min_m, d_max_m]" in text
+    for name, s in STUDIES.items():
+        assert fold(s.title) in text, name
+        for key, p in s.params.items():
+            assert fold(p.doc) in text, (name, key)
+
+
 def test_run_then_report(tmp_path):
     r = _run("run", "seed001-fig4-hpl-cdf", "--realizations", "1500", "--out", str(tmp_path),
              "--no-progress")
