@@ -3,6 +3,7 @@
     python tools/maast_map_rows.py export LAT [LAT ...]   # writes /tmp/maast_rows/*.txt
     octave-cli --eval "addpath('/path/to/maast_for_araim_2'); run('tools/maast_map_rows.m')"
     python tools/maast_map_rows.py compare OUT            # OUT: an availability-map run
+    python tools/maast_map_rows.py fixture OPT.txt NOOPT.txt EVERY   # tests/data fixture
 
 ``export`` computes the map's own inputs (sky, elevation mask, C_int, C_acc, b_nom, P_sat) for
 every user-epoch of the given latitude rows, with the map's default parameters, and writes them
@@ -106,8 +107,39 @@ def compare(out_dir):
     print(json.dumps(report, indent=1))
 
 
+def fixture(opt_txt, noopt_txt, every):
+    """tests/data/maast_map_rows.json: every ``every``-th user-epoch of los.txt with MAAST's
+    outputs under its defaults (``maast_map_rows.m``, OPT.txt) and with prm.opt = 0 and every
+    target 0 (the PL bisection run to its tolerance, NOOPT.txt; the same .m with those four
+    lines changed), keyed by (lat, lon, epoch)."""
+    d = np.loadtxt(DIR / "los.txt")
+    outs = [{tuple(r[:3]): r[3:] for r in np.loadtxt(f)} for f in (opt_txt, noopt_txt)]
+    cases = []
+    for u in np.unique(d[:, 0])[::every]:
+        rows = d[d[:, 0] == u]
+        key = tuple(rows[0, 9:12])
+        if key not in outs[0] or key not in outs[1]:
+            continue
+        a, b = outs[0][key], outs[1][key]
+        cases.append({
+            "lat_deg": key[0], "lon_deg": key[1], "epoch": int(key[2]),
+            "g": rows[:, 1:4].round(12).tolist(), "var_int_m2": rows[:, 4].tolist(),
+            "var_acc_m2": rows[:, 5].tolist(), "b_nom_m": rows[:, 6].tolist(),
+            "p_sat": rows[:, 7].tolist(), "galileo": (rows[:, 8] > 100).astype(int).tolist(),
+            "maast": {"vpl_m": a[0], "emt_m": a[1], "sigma_acc_m": a[2], "hpl_m": a[3]},
+            "maast_no_opt_no_target": {"vpl_m": b[0], "emt_m": b[1], "sigma_acc_m": b[2],
+                                       "hpl_m": b[3]}})
+    pj = json.loads((DIR / "params.json").read_text())
+    out = Path(__file__).parent.parent / "tests" / "data" / "maast_map_rows.json"
+    out.write_text(json.dumps({"p_const": [pj["p_const_gps"], pj["p_const_gal"]],
+                               "cases": cases}, indent=None))
+    print(f"{len(cases)} cases to {out}")
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "export":
         export([float(x) for x in sys.argv[2:]])
+    elif sys.argv[1] == "fixture":
+        fixture(sys.argv[2], sys.argv[3], int(sys.argv[4]))
     else:
         compare(sys.argv[2])
