@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from oaraim.araim import linalg
 from oaraim.araim.batching import jit_kernel
@@ -69,7 +70,12 @@ def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, 
                      budget, max_order, weighting, iterations, fault_modes=DEFAULT_RULE):
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
     pr = _project(*args, budget, max_order, weighting, fault_modes=fault_modes)
-    yl = jnp.where(args[7], to_batch_last(y, 1), 0.0)  # (L, B)
+    yl = to_batch_last(y, 1)  # (L, B)
+    y_ok = jnp.isfinite(yl) | ~args[7]
+    # a non-finite residual of a valid source: nothing claimed (no detection, no exclusion)
+    pr = pr._replace(status=jnp.where(jnp.all(y_ok, axis=0), pr.status, Status.INVALID_INPUT)
+                     .astype(pr.status.dtype))
+    yl = jnp.where(args[7] & y_ok, yl, 0.0)
     shift = jnp.sum(pr.s_pos * yl[None, None], axis=2)  # (K, 3, B)
     sep = jnp.where(pr.monitored[:, None], shift - shift[:1], 0.0)
     sep = jnp.where(pr.threshold > 0, sep, 0.0)  # zero threshold = zero separation (Thm 1)
@@ -170,6 +176,7 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
     position = select(pick(sub.position_m), jnp.full(top.position_m.shape, jnp.nan),
                       top.position_m)
     position = jnp.where(jnp.isnan(position), jnp.inf, position)
+    position = jnp.where((top.pl.status == Status.INVALID_INPUT)[..., None], jnp.inf, position)
     mode = jnp.where(detected & found, best, -1)
     return FDEResult(detected, excluded, mode, top.tau, position, pl, pl.status)
 
@@ -203,6 +210,15 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
                                      p_const, budget, valid, max_order, all_in_view_weighting,
                                      rule)
     y = jnp.broadcast_to(jnp.asarray(residual_m, jnp.float64), args[0].shape[:-1])
+    try:
+        bad = ~np.isfinite(np.asarray(y)) & np.asarray(args[7])
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        bad = None  # traced: the kernel reports INVALID_INPUT
+    if bad is not None and bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"residual_m of a valid source is not finite at batch index "
+                         f"{idx[:-1]}, source {idx[-1]}: {float(np.asarray(y)[bad][0])!r} "
+                         "(mark the source invalid or drop the epoch)")
     return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
               fault_modes=rule)
 

@@ -399,9 +399,9 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
         linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat,
                                         p_const, valid))
     # from the stored batch-last inputs (measured, bench case, 2 threads: the flags from the
-    # caller's batch-first arrays cost 4 % of the kernel)
-    flags = (_input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C)
-             if input_flags else None)
+    # caller's batch-first arrays cost 4 % of the kernel); always: a flagged geometry's status
+    # is INVALID_INPUT (the host raises where it can)
+    flags = _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, valid, C)
     fm = select_fault_modes(valid, constellation, p_sat, p_const, budget, fault_modes,
                             max_order)
     g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: note above ``_blocks``)
@@ -467,7 +467,7 @@ def _project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, b
             sigma_ss = jnp.sqrt(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None], axis=2))
             sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
     pr = _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
-                 budget, g.dtype)
+                 budget, g.dtype, flags != 0)
     return (pr, flags) if input_flags else pr
 
 
@@ -510,8 +510,9 @@ def _adjusted_projection(pr, var_int, var_acc, b_nom, valid, budget, opt):
 
 
 def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc, budget,
-            dtype):
-    """Thresholds (eq. 12), priors, P_nm and status from the per-mode quantities."""
+            dtype, invalid_input=False):
+    """Thresholds (eq. 12), priors, P_nm and status from the per-mode quantities;
+    ``invalid_input`` (B,) marks geometries with an unusable input (status INVALID_INPUT)."""
     false0 = jnp.zeros_like(fm.live[:1])
     live = jnp.concatenate([false0, fm.live], axis=0)
     prior_all = jnp.concatenate([jnp.zeros_like(fm.prior[:1]), fm.prior], axis=0)
@@ -541,6 +542,7 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
         n_valid < 3 + n_present + 1, Status.TOO_FEW_SOURCES,
         jnp.where(~aiv_ok, Status.SINGULAR_GEOMETRY,
                   jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK)))
+    status = jnp.where(invalid_input, Status.INVALID_INPUT, status)
     sigma_acc_u = jnp.sqrt(jnp.sum(jnp.where(aiv_ok, s_pos_raw[0, 2], 0.0) ** 2 * var_acc,
                                    axis=0))
     excluded = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)
@@ -1087,14 +1089,29 @@ _protection_levels_part_jit = jit_kernel(_protection_levels_part,
                                          static_argnames=("size",) + _STATIC)
 
 
-def _input_flags(constellation, var_int, var_acc, b_nom, p_sat, valid, C):
-    """(B,) int8, nonzero where a valid source of the geometry fails a range check of
-    ``_check_inputs`` (bit k: the k-th of ``_INPUT_RANGES``, then the constellation label).
-    Batch-last (L, B) inputs (``_project``'s), C constellation slots; the ORs over sources
-    written out (``_max`` on booleans, vectorised over the batch)."""
+#: a line-of-sight row of a valid source must have a Euclidean norm within this of 1 (rows
+#: printed to 4 decimals, as the ADD's Appendix D, are within 1e-4; a (0, 0, 0) row or an
+#: unnormalised vector is refused)
+UNIT_ROW_TOLERANCE = 1e-3
+
+
+def _unit_rows(g, axis):
+    """Rows of g (3 entries along ``axis``) finite with norm within UNIT_ROW_TOLERANCE of 1."""
+    n2 = jnp.sum(g * g, axis=axis)
+    return jnp.isfinite(n2) & (jnp.abs(jnp.sqrt(jnp.where(jnp.isfinite(n2), n2, 0.0)) - 1.0)
+                               <= UNIT_ROW_TOLERANCE)
+
+
+def _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, valid, C):
+    """(B,) int8, nonzero where a valid source of the geometry fails a check of
+    ``_check_inputs`` (bit k: the k-th of ``_INPUT_RANGES``, then the constellation label,
+    then the line-of-sight row). Batch-last (L, 3, B) and (L, B) inputs (``_project``'s), C
+    constellation slots; the ORs over sources written out (``_max`` on booleans, vectorised
+    over the batch)."""
     tests = [_in_range(x, lo, lo_ok, hi) for x, (lo, lo_ok, hi) in zip(
         (var_int, var_acc, b_nom, p_sat), _INPUT_RANGES.values(), strict=True)]
     tests.append((constellation >= 0) & (constellation < C))
+    tests.append(_unit_rows(g, 1))
     flags = jnp.zeros(valid.shape[1:], jnp.int8)
     for bit, ok in enumerate(tests):
         any_bad = _max(valid & ~ok, 0)  # OR over the sources of (L, B)
@@ -1132,7 +1149,7 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
         ("var_int_m2", var_int_m2), ("var_acc_m2", var_acc_m2), ("b_nom_m", b_nom_m),
         ("p_sat", p_sat))}
     try:
-        _check_inputs(arrays, p_const, constellation, valid, C, check_sources)
+        _check_inputs(arrays, p_const, constellation, valid, C, check_sources, g)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         pass  # traced: the caller validates outside jit
     return (g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"], arrays["b_nom_m"],
@@ -1150,12 +1167,19 @@ def _in_range(x, lo, lo_ok, hi):
     return ((x >= lo) if lo_ok else (x > lo)) & (x < hi)
 
 
-def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True):
-    """ValueError naming the first argument out of range at a valid source. Fast path: the
-    minimum and maximum over every source, valid or not (two passes without temporaries); the
-    masked elementwise test only when that fails, to find a valid offender and its value.
-    Measured on the bench batch (65,536 x 13): 2.0 ms against 3.3 ms for the masked test
-    alone."""
+def _where(bad):
+    """'batch index (i, j), source l' of the first True of ``bad`` (..., L)."""
+    idx = tuple(int(i) for i in np.argwhere(bad)[0])
+    return f"batch index {idx[:-1]}, source {idx[-1]}"
+
+
+def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, g=None):
+    """ValueError naming the first argument out of range at a valid source, with its batch
+    index and source. Fast path: the minimum and maximum over every source, valid or not (two
+    passes without temporaries); the masked elementwise test only when that fails, to find a
+    valid offender and its value. Measured on the bench batch (65,536 x 13): 2.0 ms against
+    3.3 ms for the masked test alone. ``g`` (..., L, 3): rows of valid sources finite, norm
+    within UNIT_ROW_TOLERANCE of 1."""
     pc = np.asarray(p_const)
     if not np.all((pc >= 0) & (pc < 1)):
         raise ValueError("p_const must lie in [0, 1), got "
@@ -1172,15 +1196,29 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True):
         bad = v & ~_in_range(x, lo, lo_ok, hi)
         if bad.any():
             value = float(x[bad].ravel()[0])
-            raise ValueError(f"{name} of a valid source is invalid: {value!r} "
-                             "(variances must be finite and > 0 (m^2), biases >= 0 (m), "
-                             "probabilities in [0, 1))")
+            raise ValueError(f"{name} of a valid source is invalid at {_where(bad)}: "
+                             f"{value!r} (variances must be finite and > 0 (m^2), biases >= 0 "
+                             "(m), probabilities in [0, 1))")
     lab = np.asarray(constellation)
     if lab.size and (lab.min() < 0 or lab.max() >= C):
         v = np.asarray(valid) if v is None else v
-        if np.any(v & ((lab < 0) | (lab >= C))):
+        bad = v & ((lab < 0) | (lab >= C))
+        if np.any(bad):
             raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
-                             f"(p_const has {C} entries), got {lab[v].min()}..{lab[v].max()}")
+                             f"(p_const has {C} entries), got {int(lab[bad].ravel()[0])} at "
+                             f"{_where(bad)}")
+    if g is not None:
+        ok = np.asarray(_unit_rows(jnp.asarray(g), -1))
+        if not ok.all():
+            v = np.asarray(valid) if v is None else v
+            bad = v & ~ok
+            if bad.any():
+                row = np.asarray(g)[bad][0]
+                raise ValueError(
+                    f"g (line-of-sight rows) of a valid source is not a unit vector at "
+                    f"{_where(bad)}: {row.tolist()} (rows must be finite with norm within "
+                    f"{UNIT_ROW_TOLERANCE} of 1: geometry.geometry_rows, or mark the source "
+                    "invalid)")
 
 
 def required_order(valid, constellation, p_sat, p_const, budget, cap=MAX_AUTO_ORDER,
@@ -1329,7 +1367,7 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
         return res  # traced: the caller validates outside jit
     if flagged:
         _check_inputs(dict(zip(_INPUT_RANGES, args[2:6], strict=True)), args[6], args[1],
-                      args[7], args[6].shape[-1])
+                      args[7], args[6].shape[-1], g=args[0])
         raise AssertionError("the kernel's input flags and the host checks disagree")
     return res
 

@@ -2,7 +2,8 @@
 
 Failures are data (DESIGN.md): a batch never raises; the protection level is ``inf`` and the
 status says why. Codes are small integers so they live in integer arrays beside the results.
-When several reasons apply, the lowest non-zero code is reported.
+When several reasons apply, the lowest non-zero code is reported, except INVALID_INPUT,
+which overrides every other.
 """
 
 import enum
@@ -24,6 +25,10 @@ class Status(enum.IntEnum):
     UNMONITORED_RISK = 5
     #: a fault was detected and no candidate subset passed its own test (``detect_and_exclude``)
     EXCLUSION_FAILED = 6
+    #: an input of a valid source is unusable (a non-finite or non-unit line-of-sight row, a
+    #: non-finite residual, a variance, bias or prior out of range): nothing is claimed, no
+    #: detection, no exclusion. Overrides every other code. The host wrappers raise instead
+    INVALID_INPUT = 7
 
 
 def describe(code: int) -> str:
