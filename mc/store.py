@@ -80,15 +80,105 @@ def provenance(study, params, seed, realizations, wall_s, **extra):
     }
 
 
-def write_results(out_dir, dataset, summary, provenance_dict):
-    """Write one study's results; data first, summary last (its presence marks completion)."""
+def write_results(out_dir, dataset, summary, provenance_dict, before_summary=None):
+    """Write one study's results so that a folder holding ``summary.json`` is always complete:
+    the old summary is removed first, the data written to a temporary name and renamed over
+    the old, provenance next, then ``before_summary()`` (the figures, which read the data), the
+    summary last (atomic renames throughout). Returns ``before_summary()``'s value."""
+    import shutil
+
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").unlink(missing_ok=True)
+    tmp = out_dir / f"data.zarr.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
     with warnings.catch_warnings():
         # zarr 3 warns that fixed-length string arrays (e.g. tower or satellite names) have no
         # Zarr V3 specification yet; zarr and xarray read them back exactly (tested), and the
         # warning says nothing a user can act on
         warnings.filterwarnings("ignore", message=".*does not have a Zarr V3 specification")
-        dataset.to_zarr(out_dir / "data.zarr", mode="w", consolidated=False)
+        dataset.to_zarr(tmp, mode="w", consolidated=False)
+    final = out_dir / "data.zarr"
+    if final.exists():
+        old = out_dir / f"data.zarr.old-{os.getpid()}"
+        os.replace(final, old)
+        os.replace(tmp, final)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, final)
     write_json(out_dir / "provenance.json", provenance_dict)
+    out = before_summary() if before_summary is not None else None
     write_json(out_dir / "summary.json", summary)
+    return out
+
+
+LOCK_NAME = ".oaraim.lock"
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    except OSError:
+        return False
+    return True
+
+
+class OutputLock:
+    """Exclusive use of a study's output folder for one run (a context manager).
+
+    On entry the folder is created if needed and checked to be a writable directory (one-line
+    ``OutputError`` otherwise, before any computation); a lock file holding the pid is created
+    exclusively. A second run into a folder whose lock names a live process is refused; a lock
+    left by a dead process is taken over (``taken_over`` names its pid). Released on exit."""
+
+    def __init__(self, out_dir):
+        self.out_dir = Path(out_dir)
+        self.path = self.out_dir / LOCK_NAME
+        self.taken_over = None
+
+    def __enter__(self):
+        d = self.out_dir
+        if d.exists() and not d.is_dir():
+            raise OutputError(f"--out: {d} exists and is not a folder; choose another --out")
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise OutputError(f"--out: cannot create {d} ({e.strerror or e}); choose a "
+                              "writable --out") from None
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                try:
+                    pid = int(self.path.read_text().split()[0])
+                except (OSError, ValueError, IndexError):
+                    pid = None
+                if pid is not None and pid != os.getpid() and _pid_alive(pid):
+                    raise OutputError(f"--out: {d} is in use by another run (pid {pid}); wait "
+                                      "for it to finish or choose another --out") from None
+                self.taken_over = pid
+                self.path.unlink(missing_ok=True)
+                continue
+            except OSError as e:
+                raise OutputError(f"--out: {d} is not writable ({e.strerror or e}); choose a "
+                                  "writable --out") from None
+            with os.fdopen(fd, "w") as f:
+                f.write(f"{os.getpid()}\n")
+            return self
+        raise OutputError(f"--out: could not lock {d}; remove {self.path} if no run uses it")
+
+    def __exit__(self, *exc):
+        try:
+            if self.path.read_text().split()[0] == str(os.getpid()):
+                self.path.unlink()
+        except (OSError, IndexError):
+            pass
+        return False
+
+
+class OutputError(ValueError):
+    """An unusable output folder (one line for the CLI)."""

@@ -143,6 +143,9 @@ class Study:
     realization: str = ""  # what one realization is
     default_realizations: int = 1
     quick_realizations: int = 1
+    #: most realizations one run holds (a study that keeps its realizations in memory; sweep
+    #: studies chunk them to disk and have no bound): None = 20 x ``default_realizations``
+    max_realizations: int | None = None
     params: dict = {}
     #: registry name (``oaraim.data``) of the real file that ``--set nav=auto`` uses, if any
     nav_file: str = ""
@@ -153,6 +156,11 @@ class Study:
         if params.get("recording", NO_RECORDING) != NO_RECORDING:
             return ()  # a replayed recording brings its own sky
         return (self.nav_file,) if self.nav_file and params.get("nav") == "auto" else ()
+
+    def realization_limit(self) -> int | None:
+        """The most realizations a run accepts (None: no bound)."""
+        return (self.max_realizations if self.max_realizations is not None
+                else 20 * self.default_realizations)
 
     def validate(self, overrides: dict) -> dict:
         """Defaults updated with ``overrides`` (raw strings or values), each parsed and checked."""
@@ -195,6 +203,9 @@ class SweepStudy(Study):
     """
 
     axis_names: tuple = ()
+
+    def realization_limit(self) -> int | None:
+        return None  # chunked to disk (``mc.sweep``): no bound
     key_axes: tuple = ()
     chunk_param: str = "chunk"  # the parameter giving realizations per task / chunk file
 

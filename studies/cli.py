@@ -31,6 +31,17 @@ def _fail(msg: str):
     raise typer.Exit(2)
 
 
+TRUST_HELP = ("use local data files (OARAIM_DATA folder, ../shared/data) even where their "
+              "sha256 differs from the registry's (also OARAIM_TRUST_DATA=1)")
+
+
+def _trust(on: bool):
+    if on:
+        import os
+
+        os.environ["OARAIM_TRUST_DATA"] = "1"
+
+
 @app.command("list")
 def list_studies():
     """List the studies with their parameters and defaults."""
@@ -71,16 +82,19 @@ def run(
     resume: Annotated[bool, typer.Option(
         "--resume", help="sweep studies: keep the finished chunks in OUT/STUDY, compute the "
         "rest")] = False,
+    trust_data: Annotated[bool, typer.Option("--trust-data", help=TRUST_HELP)] = False,
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
     from oaraim.studies.execute import run_study
+
+    _trust(trust_data)
 
     try:
         summary, sdir, figures, wall = run_study(study, realizations=realizations, seed=seed,
                                                  out=out_dir, sets=set_, quick=quick,
                                                  show_progress=progress, resume=resume,
                                                  workers=workers, scheduler=scheduler)
-    except ValueError as e:
+    except (ValueError, OSError) as e:  # bad input, unusable --out, a full disk: one line
         _fail(str(e))
     _print_rows(summary)
     err.print(f"done in {wall:.1f} s; results in {sdir}", highlight=False)
@@ -127,6 +141,8 @@ def reproduce(
         "--results results)")] = None,
     only: Annotated[list[str] | None, typer.Option(
         "--only", hidden=True, help="run only these studies (tests)")] = None,
+    trust_data: Annotated[bool, typer.Option(
+        "--trust-data", help=TRUST_HELP)] = False,
 ):
     """Run every study and print the reproduction report.
 
@@ -137,6 +153,8 @@ def reproduce(
     from oaraim.studies.execute import check_data, run_study
     from oaraim.studies.registry import STUDIES
     from oaraim.studies.report import build_report
+
+    _trust(trust_data)
 
     if quick and results is not None:
         _fail("--results takes the full-size run: drop --quick, or drop --results (a quick run "

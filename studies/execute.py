@@ -2,10 +2,11 @@
 
 import functools
 import time
+import warnings
 from pathlib import Path
 
 from oaraim.mc.progress import ProgressBar
-from oaraim.mc.store import provenance, write_results
+from oaraim.mc.store import OutputLock, provenance, write_results
 from oaraim.studies.base import SweepStudy
 from oaraim.studies.registry import STUDIES, get_study
 
@@ -94,7 +95,22 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
         realizations = study.quick_realizations if quick else study.default_realizations
     if realizations < 1:
         raise ValueError(f"--realizations must be >= 1, got {realizations}")
+    limit = study.realization_limit()
+    if fixed is None and limit is not None and realizations > limit:
+        raise ValueError(f"--realizations {realizations:,} is more than {study.name} holds in "
+                         f"one run (at most {limit:,}, it keeps them in memory); run several "
+                         "--seed values and combine them")
     out_dir = Path(out) / study.name
+    with OutputLock(out_dir) as lock:
+        if lock.taken_over is not None:
+            warnings.warn(f"{out_dir}: took over the lock of process {lock.taken_over}, which "
+                          "is no longer running", stacklevel=2)
+        return _run_locked(study, params, realizations, seed, out_dir, show_progress, resume,
+                           workers, scheduler)
+
+
+def _run_locked(study, params, realizations, seed, out_dir, show_progress, resume, workers,
+                scheduler):
     t0 = time.perf_counter()
     extra = {}
     if isinstance(study, SweepStudy):
@@ -112,8 +128,8 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
     prov = provenance(study.name, params, seed, realizations, wall_s,
                       realization=study.realization, seed_paper=study.seed_file,
                       **{**result.extra_provenance, **extra})
-    write_results(out_dir, result.dataset, summary, prov)
-    figures = study.plot(out_dir)
+    figures = write_results(out_dir, result.dataset, summary, prov,
+                            before_summary=lambda: study.plot(out_dir))
     return summary, out_dir, figures, wall_s
 
 

@@ -87,3 +87,78 @@ def test_report_without_results_is_a_clear_error(tmp_path):
     r = _run("report", "--out", str(tmp_path))
     assert r.exit_code == 2
     assert "no study results" in _one_error_line(r)
+
+
+# ------------------------------------------------ the output folder (issue 30 item 4)
+
+FAST = ("run", "seed001-fig4-hpl-cdf", "--realizations", "1500", "--no-progress")
+
+
+def test_out_that_is_a_file_fails_before_computing(tmp_path):
+    f = tmp_path / "a_file"
+    f.write_text("x")
+    r = _run(*FAST, "--out", str(f))
+    assert r.exit_code == 2
+    assert "not a folder" in _one_error_line(r) or "cannot create" in _one_error_line(r)
+
+
+def test_out_that_cannot_be_created_is_one_line():
+    r = _run(*FAST, "--out", "/proc/oaraim-out")
+    assert r.exit_code == 2
+    assert "--out" in _one_error_line(r)
+
+
+def test_busy_folder_is_refused_and_a_stale_lock_taken_over(tmp_path):
+    """A lock naming a live process (pid 1) refuses the run; one naming a finished process is
+    taken over, the run completes and releases the lock."""
+    import subprocess
+    import sys
+
+    from oaraim.mc.store import LOCK_NAME
+
+    folder = tmp_path / "seed001-fig4-hpl-cdf"
+    folder.mkdir()
+    (folder / LOCK_NAME).write_text("1\n")
+    r = _run(*FAST, "--out", str(tmp_path))
+    assert r.exit_code == 2
+    assert "in use by another run (pid 1)" in _one_error_line(r)
+    assert not (folder / "summary.json").exists()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    (folder / LOCK_NAME).write_text(f"{dead}\n")
+    with pytest.warns(UserWarning, match=f"took over the lock of process {dead}"):
+        r = _run(*FAST, "--out", str(tmp_path))
+    assert r.exit_code == 0, r.output
+    assert (folder / "summary.json").exists() and not (folder / LOCK_NAME).exists()
+
+
+def test_a_run_that_fails_while_writing_leaves_no_summary(tmp_path, monkeypatch):
+    """summary.json marks a complete folder: a second run that fails while writing its data
+    removes the first run's summary before touching the data, and keeps the complete data of
+    the first run or none, never a mix."""
+    import xarray as xr
+
+    r = _run(*FAST, "--out", str(tmp_path))
+    assert r.exit_code == 0
+    folder = tmp_path / "seed001-fig4-hpl-cdf"
+    assert (folder / "summary.json").exists()
+
+    def broken(self, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(xr.Dataset, "to_zarr", broken)
+    r = _run(*FAST, "--out", str(tmp_path), "--set", "p_md=0.002")
+    assert r.exit_code == 2
+    assert "No space left on device" in _one_error_line(r)
+    assert not (folder / "summary.json").exists()
+    monkeypatch.undo()
+    assert xr.open_zarr(folder / "data.zarr", consolidated=False) is not None
+
+
+def test_huge_realization_count_is_refused_before_computing():
+    """Issue 30 item 7: a non-sweep study keeps its realizations in memory; 1e12 was accepted
+    and grew until killed. Refused with one line naming the limit (20 x the default)."""
+    r = _run("run", "seed001-fig4-hpl-cdf", "--realizations", "1000000000000", "--no-progress")
+    assert r.exit_code == 2
+    line = _one_error_line(r)
+    assert "at most 20,000,000" in line and "--seed" in line
