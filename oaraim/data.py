@@ -144,18 +144,78 @@ def sha256(path) -> str:
     return h.hexdigest()
 
 
+def trust_data() -> bool:
+    """True when local files are used without their checksum (``OARAIM_TRUST_DATA=1``, the
+    CLI's ``--trust-data``)."""
+    return os.environ.get("OARAIM_TRUST_DATA", "") not in ("", "0")
+
+
+#: sha256 of local files already hashed, by (resolved path, size, mtime): each costs once
+_HASHED: dict = {}
+
+
+def _hashes_file() -> Path:
+    return cache_dir() / "verified.json"
+
+
+def _cached_sha256(p: Path) -> str:
+    """sha256 of ``p``, remembered by (path, size, mtime) in this process and in
+    ``CACHE/verified.json``, so a folder file is hashed once, not at every use."""
+    st = p.stat()
+    key = f"{p.resolve()}|{st.st_size}|{st.st_mtime_ns}"
+    if key in _HASHED:
+        return _HASHED[key]
+    f = _hashes_file()
+    try:
+        known = json.loads(f.read_text())
+    except (OSError, ValueError):
+        known = {}
+    if not isinstance(known, dict):
+        known = {}
+    if key not in known:
+        known[key] = sha256(p)
+        try:
+            f.parent.mkdir(parents=True, exist_ok=True)
+            tmp = f.with_name(f"{f.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(known, indent=0))
+            os.replace(tmp, f)
+        except OSError:
+            pass  # a read-only cache: hash again next time
+    _HASHED[key] = known[key]
+    return known[key]
+
+
+def verified_local(name: str, p: Path) -> Path:
+    """``p``, the local copy of registry file ``name``, after its sha256 matched the
+    registry's (docs/data.md); ``DataUnavailable`` naming the file and both hashes otherwise,
+    unless ``trust_data()``."""
+    e = entry(name)
+    if trust_data():
+        return p
+    got = _cached_sha256(p)
+    if got != e.sha256:
+        raise DataUnavailable(
+            f"data file {name} at {p} has sha256 {got}, the registry {e.sha256}: it is not the "
+            "published file (edited or damaged); restore it (`oaraim data fetch` into the "
+            "cache after removing it), or use it anyway with --trust-data / "
+            "OARAIM_TRUST_DATA=1")
+    return p
+
+
 def status(name: str) -> tuple[str, Path | None]:
     """(state, local path) without fetching: state is 'folder' (in the OARAIM_DATA or
-    ../shared/data folder), 'cached' (in the cache with the right checksum) or 'missing'."""
+    ../shared/data folder, checksum checked: ``verified_local``), 'cached' (in the cache with
+    the right checksum) or 'missing'."""
     e = entry(name)
     env = _env_data()
     folder = data_dir()
     if folder is not None and (folder / name).is_file():
-        return "folder", folder / name
+        return "folder", verified_local(name, folder / name)
     if env is not None and not _is_url(env):
         return "missing", None  # an OARAIM_DATA folder is the only place looked at
     cached = cache_dir() / name
-    if cached.is_file() and cached.stat().st_size == e.size and sha256(cached) == e.sha256:
+    if cached.is_file() and cached.stat().st_size == e.size and (
+            _cached_sha256(cached) == e.sha256):
         return "cached", cached
     return "missing", None
 
@@ -345,8 +405,17 @@ def fetch_daily_nav(date: str, archive: str | None = None, progress: bool = True
     names = brdc_candidates(day.year, doy)
     for n in names:
         final = folder / _unz(n)
-        if final.is_file() and final.with_name(final.name + ".sha256").is_file():
-            return final
+        side = final.with_name(final.name + ".sha256")
+        if final.is_file() and side.is_file():
+            recorded = [ln.split()[0] for ln in side.read_text().splitlines()
+                        if len(ln.split()) > 1 and ln.split()[1] == final.name]
+            got = sha256(final)
+            if recorded and recorded[-1] == got:
+                return final
+            raise DataUnavailable(f"the cached daily broadcast file {final} has sha256 {got}, "
+                                  f"its record {side.name} {recorded[-1] if recorded else 'none'}"
+                                  ": it changed since it was downloaded; delete both files to "
+                                  "fetch it again")
     folder.mkdir(parents=True, exist_ok=True)
     tried = []
     for n in names:

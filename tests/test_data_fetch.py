@@ -326,3 +326,79 @@ def test_cli_source_never_points_at_its_own_folder():
     src = inspect.getsource(cli)
     assert "__file__" not in src and "RESULTS_DIR" not in src
     shutil.which("oaraim")  # the entry point exists in the venv
+
+
+# ------------------------------------------ local data verified (issue 30 item 5)
+
+
+def _edited_folder(shared_data, tmp_path):
+    folder = tmp_path / "data"
+    (folder / "almanac").mkdir(parents=True)
+    # a one-byte edit that keeps the almanac readable: one more trailing newline
+    (folder / SMALL).write_bytes((shared_data / SMALL).read_bytes() + b"\n")
+    return folder
+
+
+def test_edited_folder_file_is_refused_naming_both_hashes(shared_data, cache, tmp_path,
+                                                          monkeypatch):
+    folder = _edited_folder(shared_data, tmp_path)
+    monkeypatch.setenv("OARAIM_DATA", str(folder))
+    with pytest.raises(data.DataUnavailable) as e:
+        data.path(SMALL)
+    msg = str(e.value)
+    assert data.entry(SMALL).sha256 in msg and data.sha256(folder / SMALL) in msg
+    assert "--trust-data" in msg and "\n" not in msg
+    monkeypatch.setenv("OARAIM_TRUST_DATA", "1")
+    assert data.path(SMALL) == folder / SMALL
+
+
+def test_folder_files_are_hashed_once(shared_data, cache, tmp_path, monkeypatch):
+    """The check costs one hash per file: remembered by (path, size, mtime) in the cache's
+    verified.json, so a new process does not hash again; an edit (new mtime) is hashed."""
+    folder = tmp_path / "data"
+    (folder / "almanac").mkdir(parents=True)
+    shutil.copy2(shared_data / SMALL, folder / SMALL)
+    monkeypatch.setenv("OARAIM_DATA", str(folder))
+    calls = []
+    real = data.sha256
+    monkeypatch.setattr(data, "sha256", lambda p: calls.append(p) or real(p))
+    monkeypatch.setattr(data, "_HASHED", {})
+    for _ in range(3):
+        assert data.path(SMALL) == folder / SMALL
+    assert len(calls) == 1
+    monkeypatch.setattr(data, "_HASHED", {})  # a new process: verified.json remembers
+    assert data.path(SMALL) == folder / SMALL and len(calls) == 1
+    raw = bytearray((folder / SMALL).read_bytes())
+    raw[100] ^= 0x01
+    (folder / SMALL).write_bytes(bytes(raw))
+    with pytest.raises(data.DataUnavailable, match="not the published file"):
+        data.path(SMALL)
+    assert len(calls) == 2
+
+
+def test_cli_run_refuses_an_edited_almanac_unless_trusted(shared_data, cache, tmp_path,
+                                                          monkeypatch):
+    folder = _edited_folder(shared_data, tmp_path)
+    monkeypatch.setenv("OARAIM_DATA", str(folder))
+    monkeypatch.setenv("OARAIM_TRUST_DATA", "0")  # restored at teardown (--trust-data sets it)
+    args = ["run", "availability-map", "--set", "lat_deg=40", "--set", "lon_deg=0",
+            "--set", "galileo=none", "--set", "duration_s=600", "--no-progress",
+            "--out", str(tmp_path / "out")]
+    r = runner.invoke(app, args, catch_exceptions=False)
+    assert r.exit_code == 2
+    assert "not the published file" in _one_line(r.output)
+    r = runner.invoke(app, args + ["--trust-data"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+
+
+def test_changed_cached_broadcast_file_is_refused(shared_data, serve, cache, tmp_path):
+    day = tmp_path / "archive" / "2010" / "182"
+    day.mkdir(parents=True)
+    (day / "brdc1820.10n.gz").write_bytes(gzip.compress(
+        (shared_data / "nav/brdc1820.10n").read_bytes()))
+    url, _ = serve(tmp_path / "archive")
+    p = data.fetch_daily_nav("2010-07-01", url, progress=False)
+    assert data.fetch_daily_nav("2010-07-01", url, progress=False) == p
+    p.write_bytes(p.read_bytes() + b"\n")
+    with pytest.raises(data.DataUnavailable, match="changed since it was downloaded"):
+        data.fetch_daily_nav("2010-07-01", url, progress=False)
