@@ -116,6 +116,37 @@ def _almanac_ecef(el, t):
     return ecef
 
 
+#: what each almanac field must satisfy (a record breaking one is a parse error naming the
+#: file and line): e in [0, 1) (an orbit), sqrt(A) > 0, integers where the format has them
+_FIELD_RULES = {"e": (lambda v: 0.0 <= v < 1.0, "in [0, 1) (an elliptical orbit)"),
+                "sqrt_a": (lambda v: v > 0.0, "> 0 (sqrt of the semi-major axis, sqrt(m))"),
+                "prn": (lambda v: v >= 1 and v == int(v), "a positive integer"),
+                "health": (lambda v: v >= 0 and v == int(v), "an integer >= 0"),
+                "week": (lambda v: v >= 0 and v == int(v), "an integer >= 0"),
+                "toa": (lambda v: 0 <= v < 604800, "in [0, 604800) s of the week")}
+
+
+def _check_rows(p, rows, lines_of):
+    """AlmanacFileError (file, line) for a non-finite or unphysical value or a PRN given
+    twice. ``lines_of(i, key)``: the line of field ``key`` of record ``i``."""
+    seen = {}
+    for i, r in enumerate(rows):
+        for key, v in r.items():
+            if not np.isfinite(v):
+                raise AlmanacFileError(f"{p}: line {lines_of(i, key)}: {key} is {v!r}; every "
+                                       "almanac value must be a finite number")
+            rule = _FIELD_RULES.get(key)
+            if rule is not None and not rule[0](v):
+                raise AlmanacFileError(f"{p}: line {lines_of(i, key)}: {key} = {v!r} must be "
+                                       f"{rule[1]}")
+        prn = int(r["prn"])
+        if prn in seen:
+            raise AlmanacFileError(f"{p}: line {lines_of(i, 'prn')}: satellite {prn} appears "
+                                   f"again (first at line {seen[prn]}); one record per "
+                                   "satellite")
+        seen[prn] = lines_of(i, "prn")
+
+
 def _records(rows, system, week_reference_t_gps_s):
     arr = {k: np.array([r[k] for r in rows], np.float64) for k in rows[0]}
     week = arr["week"].astype(np.int64)
@@ -156,29 +187,32 @@ def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
         raise AlmanacFileError(f"almanac file {str(path)!r} not found")
     if system not in ("G", "E"):
         raise ValueError(f"system must be 'G' or 'E', got {system!r}")
-    rows, cur = [], None
+    rows, row_lines, cur = [], [], None
     need = set(_YUMA_KEYS.values())
     lines = p.read_text(encoding="ascii", errors="replace").splitlines()
 
     def close(lineno):
         if cur is None:
             return
-        missing = sorted(need - set(cur))
+        missing = sorted(need - set(cur) - {"_lines"})
         if missing:
             raise AlmanacFileError(f"{p}: line {lineno}: the almanac block starting at line "
                                    f"{cur['_line']} lacks {', '.join(missing)}; the file is "
                                    "truncated or not YUMA")
-        cur.pop("_line")
+        start = cur.pop("_line")
         header_prn = cur.pop("_header_prn")
+        where = cur.pop("_lines")
         if header_prn is not None:
             cur["prn"] = header_prn
+            where["prn"] = start
         rows.append(cur)
+        row_lines.append(where)
 
     for k, line in enumerate(lines, start=1):
         if line.startswith("****"):
             close(k)
             m = re.search(r"(?:PRN|SVID)-\s*(\d+)", line)
-            cur = {"_line": k, "_header_prn": int(m.group(1)) if m else None}
+            cur = {"_line": k, "_header_prn": int(m.group(1)) if m else None, "_lines": {}}
             continue
         if ":" not in line or cur is None:
             if line.strip() and cur is None:
@@ -194,10 +228,15 @@ def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
         except ValueError:
             raise AlmanacFileError(f"{p}: line {k}: cannot read {label.strip()!r} value "
                                    f"{value.strip()!r} as a number") from None
+        if key in cur["_lines"] and key != "omega0":
+            raise AlmanacFileError(f"{p}: line {k}: {label.strip()!r} given twice in the block "
+                                   f"starting at line {cur['_line']}")
+        cur["_lines"][key] = k
     close(len(lines))
     if not rows:
         raise AlmanacFileError(f"{p}: no almanac blocks ('******** Week ... almanac for "
                                "PRN-nn ********'); not a YUMA almanac")
+    _check_rows(p, rows, lambda i, key: row_lines[i].get(key, "?"))
     return Almanac(_records(rows, system, week_reference_t_gps_s),
                    GPS if system == "G" else GALILEO, p.name)
 
@@ -218,15 +257,24 @@ def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
         try:
             nums = [float(v.replace("D", "E")) for v in line.split()[:3]]
         except ValueError:
-            if k == 1:  # title text after the count
-                nums = [float(line.split()[0])]
-            else:
+            try:
+                if k != 1:
+                    raise ValueError
+                nums = [float(line.split()[0])]  # title text after the count
+            except ValueError:
                 raise AlmanacFileError(f"{p}: line {k}: cannot read {line.strip()!r} as "
                                        "numbers; not a SEM almanac") from None
         tokens.append((k, nums))
     if len(tokens) < 2:
         raise AlmanacFileError(f"{p}: line {len(lines)}: no SEM header (count, week and t_oa)")
-    n_sats = int(tokens[0][1][0])
+    n_sats = tokens[0][1][0]
+    if not (np.isfinite(n_sats) and n_sats == int(n_sats) and 1 <= n_sats <= 1000):
+        raise AlmanacFileError(f"{p}: line {tokens[0][0]}: the satellite count {n_sats!r} is "
+                               "not an integer in 1..1000; not a SEM almanac")
+    n_sats = int(n_sats)
+    if len(tokens[1][1]) < 2:
+        raise AlmanacFileError(f"{p}: line {tokens[1][0]}: expected the week and t_oa; not a "
+                               "SEM almanac")
     week, toa = tokens[1][1][0], tokens[1][1][1]
     body = tokens[2:]
     if len(body) < 8 * n_sats:
@@ -234,7 +282,7 @@ def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
             f"{p}: line {len(lines)}: {n_sats} satellites announced, 8 lines each, but only "
             f"{len(body)} lines follow; the file is truncated")
     sc = GPS_PI  # semicircles -> radians (IS-GPS-200 20.3.3.5.1.2)
-    rows = []
+    rows, starts = [], []
     for s in range(n_sats):
         b = [nums for _, nums in body[8 * s: 8 * s + 8]]
         k0 = body[8 * s][0]
@@ -246,5 +294,10 @@ def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
             "i": (0.30 + b[3][1]) * sc, "omegadot": b[3][2] * sc, "sqrt_a": b[4][0],
             "omega0": b[4][1] * sc, "omega": b[4][2] * sc, "m0": b[5][0] * sc,
             "af0": b[5][1], "af1": b[5][2], "week": week})
+        starts.append([k for k, _ in body[8 * s: 8 * s + 8]])
+    sem_line = {"prn": 0, "e": 3, "i": 3, "omegadot": 3, "sqrt_a": 4, "omega0": 4, "omega": 4,
+                "m0": 5, "af0": 5, "af1": 5, "health": 6}
+    _check_rows(p, rows, lambda i, key: starts[i][sem_line[key]] if key in sem_line
+                else tokens[1][0])
     return Almanac(_records(rows, system, week_reference_t_gps_s),
                    GPS if system == "G" else GALILEO, p.name)

@@ -153,15 +153,34 @@ def parse_towers(name, v):
 
 def read_towers(path):
     """Towers of a CSV (lat_deg, lon_deg, height_m, carrier): arrays and the carrier names
-    (sorted; carrier k becomes SOP constellation 2 + k)."""
+    (sorted; carrier k becomes SOP constellation 2 + k). UTF-8, a byte-order mark accepted
+    (Excel's "CSV UTF-8"); a short or long row, a non-number, a value out of range or a row
+    given twice (same position, height and carrier) is a ValueError naming the file and
+    line."""
     need = ("lat_deg", "lon_deg", "height_m", "carrier")
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows or any(c not in rows[0] for c in need):
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f)
+            header = next(reader, None)
+            body = [(reader.line_num, row) for row in reader]
+    except UnicodeDecodeError as e:
+        raise ValueError(f"tower file {path}: not a UTF-8 text file (byte {e.start}); save it "
+                         "as CSV with the columns " + ", ".join(need)) from None
+    header = [h.strip() for h in header] if header else []
+    if not body or any(c not in header for c in need):
         raise ValueError(f"tower file {path}: needs a header with the columns "
-                         f"{', '.join(need)}; got {list(rows[0]) if rows else 'no rows'}")
+                         f"{', '.join(need)} and at least one row; got "
+                         f"{header if header else 'an empty file'}")
+    col = {c: header.index(c) for c in need}
     lat, lon, h, car = [], [], [], []
-    for i, r in enumerate(rows, start=2):
+    seen = {}
+    for i, row in body:
+        if not any(x.strip() for x in row):
+            continue  # a blank line
+        if len(row) != len(header):
+            raise ValueError(f"tower file {path}, line {i}: {len(row)} fields where the header "
+                             f"has {len(header)} ({', '.join(header)})")
+        r = {c: row[col[c]].strip() for c in need}
         try:
             la, lo, hh = float(r["lat_deg"]), float(r["lon_deg"]), float(r["height_m"])
         except ValueError:
@@ -170,12 +189,18 @@ def read_towers(path):
         if not (-90 <= la <= 90 and -180 <= lo <= 360 and -500 <= hh <= 9000):
             raise ValueError(f"tower file {path}, line {i}: lat_deg in [-90, 90], lon_deg in "
                              f"[-180, 360], height_m in [-500, 9000] m; got {r}")
-        if not r["carrier"].strip():
+        if not r["carrier"]:
             raise ValueError(f"tower file {path}, line {i}: empty carrier")
+        key = (la, lo % 360.0, hh, r["carrier"])
+        if key in seen:
+            raise ValueError(f"tower file {path}, line {i}: the tower of line {seen[key]} again "
+                             "(same position, height and carrier); one row per transmitter "
+                             "(carriers sharing a mast: one row each)")
+        seen[key] = i
         lat.append(la)
         lon.append(lo)
         h.append(hh)
-        car.append(r["carrier"].strip())
+        car.append(r["carrier"])
     names = sorted(set(car))
     return (np.array(lat), np.array(lon), np.array(h),
             np.array([names.index(c) for c in car]), names)

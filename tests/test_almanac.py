@@ -184,3 +184,57 @@ def test_almanac_file_errors(tmp_path):
     p.write_text("24 X.AL3\n703 344063\n\n1\n31\n")
     with pytest.raises(geometry.AlmanacFileError, match="truncated"):
         geometry.read_sem(p)
+
+
+def _mutated(shared_data, tmp_path, old, new, count=1):
+    text = (shared_data / "almanac" / "almmops.txt").read_text()
+    assert old in text
+    p = tmp_path / "alm.txt"
+    p.write_text(text.replace(old, new, count))
+    return p, text
+
+
+def _line_of(text, needle):
+    return text[:text.index(needle)].count("\n") + 1
+
+
+@pytest.mark.parametrize("field, bad, why", [
+    ("Eccentricity", "nan", "finite"), ("Eccentricity", "1.5", r"in \[0, 1\)"),
+    ("SQRT(A)  (m 1/2)", "-5153.6", "> 0"), ("Health", "1.5", "integer")])
+def test_yuma_unphysical_values_are_parse_errors_with_the_line(shared_data, tmp_path, field,
+                                                               bad, why):
+    """Issue 30: 'Eccentricity: nan' or 1.5 loaded a healthy satellite with a NaN position, a
+    negative sqrt(A) was accepted. Now: the file and the line of the first record's field."""
+    text = (shared_data / "almanac" / "almmops.txt").read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith(field))
+    value = line.partition(":")[2].strip()
+    p, _ = _mutated(shared_data, tmp_path, line, line.replace(value, bad))
+    with pytest.raises(geometry.AlmanacFileError,
+                       match=rf"alm\.txt: line {_line_of(text, line)}: .*{why}"):
+        geometry.read_yuma(p)
+
+
+def test_yuma_duplicated_block_is_an_error_naming_both_lines(shared_data, tmp_path):
+    """A duplicated PRN block gave the satellite twice (a duplicated measurement in every
+    geometry, the map's median VPL 16.2 -> 12.4 m with exit 0)."""
+    text = (shared_data / "almanac" / "almmops.txt").read_text()
+    blocks = text.split("********")
+    first = "********" + blocks[1] + "********" + blocks[2]
+    p = tmp_path / "alm.txt"
+    p.write_text(text + first)
+    with pytest.raises(geometry.AlmanacFileError, match=r"satellite 1 appears again \(first "
+                                                        r"at line 1\)"):
+        geometry.read_yuma(p)
+
+
+def test_sem_wrong_file_and_bad_values_name_the_line(tmp_path):
+    p = tmp_path / "x.al3"
+    p.write_text("not an almanac at all\nsecond line\n")
+    with pytest.raises(geometry.AlmanacFileError, match=r"x\.al3: line 1: .*not a SEM"):
+        geometry.read_sem(p)
+    p.write_text("1 X.AL3\n703\n\n1\n31\n0\n 1.5 0 0\n 5153 0 0\n 0 0 0\n0\n9\n")
+    with pytest.raises(geometry.AlmanacFileError, match=r"line 2: expected the week and t_oa"):
+        geometry.read_sem(p)
+    p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 1.5 0 0\n 5153 0 0\n 0 0 0\n0\n9\n")
+    with pytest.raises(geometry.AlmanacFileError, match=r"line 7: e = 1\.5 must be in \[0, 1\)"):
+        geometry.read_sem(p)

@@ -263,6 +263,35 @@ def test_tower_csv_gives_one_constellation_per_carrier(tmp_path, shared_data):
         STUDY.validate({"towers": str(bad)})
 
 
+GOOD_TOWERS = "lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.0,0.02,30,B\n"
+
+
+@pytest.mark.parametrize("content, message", [
+    (GOOD_TOWERS + "49.99,-0.01\n", r"line 4: 2 fields where the header has 4"),
+    (GOOD_TOWERS + "50.01,0.0,40,A\n", r"line 4: the tower of line 2 again"),
+    (b"\x89PNG\r\n\x1a\n\x00\xff\xfe", r"towers\.csv: not a UTF-8 text file"),
+    (GOOD_TOWERS + "nan,0,10,A\n", r"line 4: lat_deg in \[-90, 90\]"),
+    ("", r"an empty file")])
+def test_tower_csv_errors_name_file_and_line(tmp_path, content, message):
+    """Issue 30: a short row gave a traceback, a binary file an error without its name, six
+    identical rows six independent SOPs. Each is now one ValueError naming the file (and the
+    line)."""
+    f = tmp_path / "towers.csv"
+    (f.write_bytes if isinstance(content, bytes) else f.write_text)(content)
+    with pytest.raises(ValueError, match=message) as e:
+        am.read_towers(f)
+    assert "towers.csv" in str(e.value)
+
+
+def test_tower_csv_with_a_byte_order_mark_and_shared_masts(tmp_path):
+    """Excel's "CSV UTF-8" starts with a BOM (was: 'missing column lat_deg'); two carriers on
+    one mast are two rows, both kept."""
+    f = tmp_path / "towers.csv"
+    f.write_bytes(b"\xef\xbb\xbf" + (GOOD_TOWERS + "50.01,0.0,40,B\n").encode())
+    lat, lon, h, car, names = am.read_towers(f)
+    assert lat.size == 3 and names == ["A", "B"] and car.tolist() == [0, 1, 1]
+
+
 def test_sop_inputs_are_the_seed004_model():
     vi, va = (np.asarray(x) for x in sop_variances(np.array([2.0])))
     assert vi[0] == va[0] == 4.0  # sigma_URE^S = sigma_URA^S, no user term (DESIGN.md)
