@@ -709,10 +709,12 @@ class AvailabilityMap(SweepStudy):
                  f"% ({lay['level'].name})", "unit": "%", "published": None,
                  "reproduced": metrics["coverage_pct"],
                  "note": "area-weighted (cos latitude); no seed publishes a map, MAAST is the "
-                 f"reference implementation; fault modes {params['fault_modes']}"},
+                 f"reference implementation; fault modes {params['fault_modes']}, position "
+                 f"estimator {params['position_opt']}"},
                 {"quantity": "mean availability over the grid", "unit": "%", "published": None,
                  "reproduced": metrics["availability_mean_pct"],
-                 "note": f"fault modes {params['fault_modes']}"}]
+                 "note": f"fault modes {params['fault_modes']}, position estimator "
+                 f"{params['position_opt']}"}]
         out = out.assign_attrs(service_level=lay["level"].name, sky_source=sky_desc,
                                target=lay["target"], coverage_pct=metrics["coverage_pct"],
                                coastlines=params["coastlines"],
