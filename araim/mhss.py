@@ -1211,7 +1211,11 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, 
                              f"(p_const has {C} entries), got {int(lab[bad].ravel()[0])} at "
                              f"{_where(bad)}")
     if g is not None:
-        ok = np.asarray(_unit_rows(jnp.asarray(g), -1))
+        gn = np.asarray(g)
+        n2 = np.einsum("...i,...i->...", gn, gn)  # NumPy: no per-shape compilation on the host
+        with np.errstate(invalid="ignore"):
+            ok = ((n2 >= (1.0 - UNIT_ROW_TOLERANCE) ** 2)
+                  & (n2 <= (1.0 + UNIT_ROW_TOLERANCE) ** 2))
         if not ok.all():
             v = np.asarray(valid) if v is None else v
             bad = v & ~ok
