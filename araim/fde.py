@@ -41,7 +41,7 @@ from oaraim.araim.mhss import (
     required_order,
 )
 from oaraim.araim.status import Status
-from oaraim.araim.validate import check_int
+from oaraim.araim.validate import batch_source, check_int
 
 
 class Separation(NamedTuple):
@@ -215,10 +215,9 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         bad = None  # traced: the kernel reports INVALID_INPUT
     if bad is not None and bad.any():
-        idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise ValueError(f"residual_m of a valid source is not finite at batch index "
-                         f"{idx[:-1]}, source {idx[-1]}: {float(np.asarray(y)[bad][0])!r} "
-                         "(mark the source invalid or drop the epoch)")
+        raise ValueError(f"residual_m of a valid source is not finite at {batch_source(bad)}: "
+                         f"{float(np.asarray(y)[bad][0])!r} (mark the source invalid or drop "
+                         "the epoch)")
     return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
               fault_modes=rule)
 

@@ -60,7 +60,7 @@ from oaraim.araim.fault_modes import (
 )
 from oaraim.araim.position_opt import adjusted_rows, check_position_optimization
 from oaraim.araim.status import Status
-from oaraim.araim.validate import check_int
+from oaraim.araim.validate import batch_source, check_int
 
 #: the PL returned lies within this distance above the exact root of eqs. (14)/(16) (issue: 1e-3)
 PL_TOLERANCE_M = 1e-3
@@ -1096,13 +1096,16 @@ _protection_levels_part_jit = jit_kernel(_protection_levels_part,
 UNIT_ROW_TOLERANCE = 1e-3
 
 
+def _unit_norm(n2):
+    """Squared row norms n2 (NumPy or JAX) finite with the norm within UNIT_ROW_TOLERANCE of
+    1: (1 - tol)^2 <= n2 <= (1 + tol)^2 (no sqrt; NaN and inf fail)."""
+    return (n2 >= (1.0 - UNIT_ROW_TOLERANCE) ** 2) & (n2 <= (1.0 + UNIT_ROW_TOLERANCE) ** 2)
+
+
 def _unit_rows(g, axis):
-    """Rows of g (3 entries along ``axis``) finite with norm within UNIT_ROW_TOLERANCE of 1:
-    (1 - tol)^2 <= |g|^2 <= (1 + tol)^2, written out (no sqrt; NaN and inf fail)."""
+    """``_unit_norm`` of the rows of g (3 entries along ``axis``), the squares written out."""
     parts = [jax.lax.index_in_dim(g, a, axis % g.ndim, keepdims=False) for a in range(3)]
-    n2 = parts[0] * parts[0] + parts[1] * parts[1] + parts[2] * parts[2]
-    return ((n2 >= (1.0 - UNIT_ROW_TOLERANCE) ** 2)
-            & (n2 <= (1.0 + UNIT_ROW_TOLERANCE) ** 2))
+    return _unit_norm(parts[0] * parts[0] + parts[1] * parts[1] + parts[2] * parts[2])
 
 
 def _input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, valid, C):
@@ -1170,12 +1173,6 @@ def _in_range(x, lo, lo_ok, hi):
     return ((x >= lo) if lo_ok else (x > lo)) & (x < hi)
 
 
-def _where(bad):
-    """'batch index (i, j), source l' of the first True of ``bad`` (..., L)."""
-    idx = tuple(int(i) for i in np.argwhere(bad)[0])
-    return f"batch index {idx[:-1]}, source {idx[-1]}"
-
-
 def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, g=None):
     """ValueError naming the first argument out of range at a valid source, with its batch
     index and source. Fast path: the minimum and maximum over every source, valid or not (two
@@ -1199,7 +1196,7 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, 
         bad = v & ~_in_range(x, lo, lo_ok, hi)
         if bad.any():
             value = float(x[bad].ravel()[0])
-            raise ValueError(f"{name} of a valid source is invalid at {_where(bad)}: "
+            raise ValueError(f"{name} of a valid source is invalid at {batch_source(bad)}: "
                              f"{value!r} (variances must be finite and > 0 (m^2), biases >= 0 "
                              "(m), probabilities in [0, 1))")
     lab = np.asarray(constellation)
@@ -1209,13 +1206,11 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, 
         if np.any(bad):
             raise ValueError(f"constellation labels must be integers in 0..{C - 1} "
                              f"(p_const has {C} entries), got {int(lab[bad].ravel()[0])} at "
-                             f"{_where(bad)}")
+                             f"{batch_source(bad)}")
     if g is not None:
         gn = np.asarray(g)
-        n2 = np.einsum("...i,...i->...", gn, gn)  # NumPy: no per-shape compilation on the host
-        with np.errstate(invalid="ignore"):
-            ok = ((n2 >= (1.0 - UNIT_ROW_TOLERANCE) ** 2)
-                  & (n2 <= (1.0 + UNIT_ROW_TOLERANCE) ** 2))
+        with np.errstate(invalid="ignore"):  # NumPy: no per-shape compilation on the host
+            ok = _unit_norm(np.einsum("...i,...i->...", gn, gn))
         if not ok.all():
             v = np.asarray(valid) if v is None else v
             bad = v & ~ok
@@ -1223,7 +1218,7 @@ def _check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, 
                 row = np.asarray(g)[bad][0]
                 raise ValueError(
                     f"g (line-of-sight rows) of a valid source is not a unit vector at "
-                    f"{_where(bad)}: {row.tolist()} (rows must be finite with norm within "
+                    f"{batch_source(bad)}: {row.tolist()} (rows must be finite with norm within "
                     f"{UNIT_ROW_TOLERANCE} of 1: geometry.geometry_rows, or mark the source "
                     "invalid)")
 

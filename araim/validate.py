@@ -70,3 +70,10 @@ def check_sigma(sigma_m, valid):
         bad = s[bad_mask].ravel()[0]
         raise ValueError(
             f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
+
+
+def batch_source(bad) -> str:
+    """'batch index (i, j), source l' of the first True of a boolean (..., L) array: where a
+    host check found an unusable input (the error messages of the receiver functions)."""
+    idx = tuple(int(i) for i in np.argwhere(np.asarray(bad))[0])
+    return f"batch index {idx[:-1]}, source {idx[-1]}"
