@@ -5,11 +5,7 @@
 % no exposure (t_exp 0), N_es 1, max_pmd_flag 0. Writes /tmp/maast_rows/maast_vhpl.txt.
 pkg load statistics
 addpath(fullfile(fileparts(mfilename("fullpath")), "maast_shim"));
-global MOPS_NOT_MONITORED MOPS_MIN_GPSPRN MOPS_MAX_GPSPRN MOPS_MIN_GLOPRN MOPS_MAX_GLOPRN ...
-       MOPS_MIN_GALPRN MOPS_MAX_GALPRN MOPS_MIN_BDUPRN MOPS_MAX_BDUPRN
-MOPS_NOT_MONITORED = Inf; MOPS_MIN_GPSPRN = 1; MOPS_MAX_GPSPRN = 100;
-MOPS_MIN_GALPRN = 101; MOPS_MAX_GALPRN = 200; MOPS_MIN_GLOPRN = 201; MOPS_MAX_GLOPRN = 236;
-MOPS_MIN_BDUPRN = 301; MOPS_MAX_BDUPRN = 336;
+maast_prn_ranges;  % the globals usr_vhpl_araim reads (maast_shim/)
 d = load('/tmp/maast_rows/los.txt');
 pj = jsondecode(fileread('/tmp/maast_rows/params.json'));
 prm.phmi_vert = 9.8e-8; prm.phmi_hor = 2e-9; prm.p_thres = 6e-8; prm.p_exc_thres = 1;

@@ -6,12 +6,7 @@
 % (MAAST's code is not part of this project; this driver only calls it.)
 pkg load statistics
 addpath(fullfile(fileparts(mfilename("fullpath")), "maast_shim"));
-G = [0.0225 0.9951 -0.0966 1 0; 0.6750 -0.6900 -0.2612 1 0; 0.0723 -0.6601 -0.7477 1 0;
-     -0.9398 0.2553 -0.2269 1 0; -0.5907 -0.7539 -0.2877 1 0; -0.3236 -0.0354 -0.9455 0 1;
-     -0.6748 0.4356 -0.5957 0 1; 0.0938 -0.7004 -0.7075 0 1; 0.5571 0.3088 -0.7709 0 1;
-     0.6622 0.6958 -0.2780 0 1];
-cint = [3.8865 1.4377 0.8604 1.6383 1.3229 0.8434 0.8963 0.8669 0.8573 1.3616]';
-cacc = [3.5740 1.1252 0.5479 1.3258 1.0104 0.5309 0.5838 0.5544 0.5448 1.0491]';
+add_example_inputs;  % G, cint, cacc (maast_shim/)
 prm.phmi_vert = 9.8e-8; prm.phmi_hor = 2e-9; prm.p_thres = 8e-8; prm.p_exc_thres = 1;
 prm.pfa_vert = 3.9e-6; prm.pfa_hor = 9e-8; prm.p_emt = 1e-5; prm.pl_tol = 1e-4;
 prm.N_es_int = 1; prm.N_es_cont = 1; prm.vpl_target = 35; prm.hpl_target = 40;
