@@ -41,6 +41,11 @@ class DataUnavailable(ValueError):
     """A real data file could not be found or fetched; the message is one line with the fix."""
 
 
+class SourceUnreachable(DataUnavailable):
+    """The download itself failed (refused, timed out, HTTP error): the source, not the file,
+    is the problem, so other files from the same source would fail the same way."""
+
+
 @dataclass(frozen=True)
 class DataFile:
     name: str  # path under the data folder, e.g. "nav/brdc0010.22n"
@@ -249,6 +254,44 @@ def path(name: str, fetch: bool = True, progress: bool = True) -> Path:
     return _download(entry(name), source_url(name), progress)
 
 
+def link_folder(folder, names=None, progress: bool = False) -> dict[str, str]:
+    """Make ``folder`` hold every registry file (or ``names``) at its name (``nav/...``,
+    ``obs/...``) as a link to the verified local copy ``path`` gives: from the data folder,
+    the cache, or fetched from the mirror or the public origins, exactly as a study gets it.
+
+    Returns ``{name: one-line reason}`` for the files that could not be had (empty when all
+    are there); a reason from ``path`` names the file and the fix. Once a source fails to
+    answer (``SourceUnreachable``), the remaining files from the same host are not tried
+    (each would wait for the same timeout); their reason names the first failure. This is
+    how the test suite gets its data (tests/conftest.py).
+    """
+    folder = Path(folder)
+    failed: dict[str, str] = {}
+    down: dict[str, str] = {}  # host -> the name whose download failed first
+    for name in names if names is not None else registry():
+        try:
+            host = urllib.parse.urlparse(source_url(name)).netloc or "file://"
+            if host in down:
+                failed[name] = f"not tried, as {down[host]} could not be fetched from {host}"
+                continue
+            local = path(name, progress=progress)
+        except SourceUnreachable as exc:
+            down[host] = name
+            failed[name] = str(exc)
+            continue
+        except DataUnavailable as exc:
+            failed[name] = str(exc)
+            continue
+        link = folder / name
+        link.parent.mkdir(parents=True, exist_ok=True)
+        link.unlink(missing_ok=True)
+        try:
+            link.symlink_to(local.resolve())
+        except OSError:  # no symbolic links here (some Windows setups): a copy
+            shutil.copyfile(local, link)
+    return failed
+
+
 def _reason(exc: BaseException) -> str:
     """A short one-line reason for a failed download."""
     import requests
@@ -274,8 +317,8 @@ def _download(e: DataFile, url: str, progress: bool) -> Path:
         try:
             _copy_verified(url, dest, e)
         except OSError as exc:
-            raise DataUnavailable(f"data file {e.name}: copy from {url} failed: "
-                                  f"{exc.strerror or exc}; " + _fix(e.name)) from None
+            raise SourceUnreachable(f"data file {e.name}: copy from {url} failed: "
+                                    f"{exc.strerror or exc}; " + _fix(e.name)) from None
         return dest
     import pooch
     import requests
@@ -287,8 +330,8 @@ def _download(e: DataFile, url: str, progress: bool) -> Path:
                        downloader=pooch.HTTPDownloader(progressbar=bar or False,
                                                        timeout=TIMEOUT_S))
     except requests.RequestException as exc:
-        raise DataUnavailable(f"data file {e.name}: download from {url} failed: "
-                              f"{_reason(exc)}; " + _fix(e.name)) from None
+        raise SourceUnreachable(f"data file {e.name}: download from {url} failed: "
+                                f"{_reason(exc)}; " + _fix(e.name)) from None
     except ValueError as exc:  # pooch: hash mismatch (it removes the download)
         got = re.findall(r"[0-9a-f]{64}", str(exc))
         got = next((g for g in got if g != e.sha256), "?")

@@ -1,14 +1,18 @@
-"""The shared real-data folder is found (CI sets OARAIM_REQUIRE_DATA=1, so this cannot skip)."""
+"""The tests' data fixture gets every registry file (CI sets OARAIM_REQUIRE_DATA=1, so this
+cannot skip there); tests/test_data_fetch.py runs it against a loopback mirror."""
 
 import pytest
 
+from oaraim import data
 from oaraim.data import DataUnavailable, data_dir
 
 
-def test_shared_data_folder_has_the_documented_files(shared_data):
-    for rel in ("README.md", "nav/brdc1820.10n", "orbits/igs15904.sp3", "almanac/almmops.txt",
-                "obs/07590920.05o"):
-        assert (shared_data / rel).is_file(), rel
+def test_shared_data_holds_every_registry_file_verified(shared_data):
+    """Each registry file is at its name in the fixture's folder and is the published file."""
+    for name, e in data.registry().items():
+        assert (shared_data / name).is_file(), name
+        assert (shared_data / name).stat().st_size == e.size, name
+        assert data.sha256(shared_data / name) == e.sha256, name
 
 
 def test_oaraim_data_pointing_nowhere_is_a_clear_error(monkeypatch, tmp_path):

@@ -402,3 +402,75 @@ def test_changed_cached_broadcast_file_is_refused(shared_data, serve, cache, tmp
     p.write_bytes(p.read_bytes() + b"\n")
     with pytest.raises(data.DataUnavailable, match="changed since it was downloaded"):
         data.fetch_daily_nav("2010-07-01", url, progress=False)
+
+
+# ------------------------------ the tests get their data as users do (issue 30 item 8)
+
+
+def test_link_folder_fetches_verifies_and_links(shared_data, serve, cache, tmp_path,
+                                                monkeypatch):
+    url, srv = serve(shared_data)
+    monkeypatch.setenv("OARAIM_DATA", url)
+    names = [SMALL, "obs/07590920.05n"]
+    assert data.link_folder(tmp_path / "linked", names) == {}
+    for name in names:
+        assert (tmp_path / "linked" / name).resolve() == (cache / name).resolve()
+        assert (tmp_path / "linked" / name).read_bytes() == (shared_data / name).read_bytes()
+    assert sorted(srv.paths) == sorted("/" + n for n in names)
+
+
+def test_link_folder_names_each_missing_file_and_why(shared_data, serve, cache, tmp_path,
+                                                     monkeypatch):
+    bad = tmp_path / "mirror"
+    (bad / "almanac").mkdir(parents=True)
+    (bad / SMALL).write_bytes((shared_data / SMALL).read_bytes() + b"\n")
+    monkeypatch.setenv("OARAIM_DATA", serve(bad)[0])
+    failed = data.link_folder(tmp_path / "linked", [SMALL, "obs/07590920.05n"])
+    assert f"data file {SMALL} from http://127.0.0.1:" in failed[SMALL]
+    assert "failed its checksum" in failed[SMALL]
+    assert "HTTP 404" in failed["obs/07590920.05n"]
+    assert not (tmp_path / "linked" / SMALL).exists()
+    monkeypatch.setenv("OARAIM_DATA", _refused_url())  # the first refusal stops the others
+    failed = data.link_folder(tmp_path / "linked", [SMALL, "obs/07590920.05n"])
+    assert "Connection refused" in failed[SMALL]
+    assert failed["obs/07590920.05n"].startswith(f"not tried, as {SMALL} could not be "
+                                                 "fetched from 127.0.0.1:")
+
+
+def _pytest_data_test(env_extra, cache_dir):
+    """Run the data fixture's test in a fresh pytest process with only ``env_extra`` as the
+    data settings (no folder beside the checkout is used once OARAIM_DATA is a URL)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("OARAIM_")}
+    env.update(OARAIM_CACHE=str(cache_dir), **env_extra)
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rs",
+                        "tests/test_data.py::test_shared_data_holds_every_registry_file_"
+                        "verified"], cwd=data.REPO_ROOT, env=env, capture_output=True,
+                       text=True, timeout=300)
+    return r.returncode, r.stdout + r.stderr
+
+
+def test_test_suite_fetches_its_data_from_a_mirror_url(shared_data, serve, cache):
+    """The README's test command with OARAIM_DATA set to a mirror URL and an empty cache runs
+    the data-backed tests: every file is fetched once, checksum-verified, into the cache."""
+    url, srv = serve(shared_data)
+    rc, out = _pytest_data_test({"OARAIM_DATA": url, "OARAIM_REQUIRE_DATA": "1"}, cache)
+    assert rc == 0 and "1 passed" in out, out
+    assert sorted(srv.paths) == sorted("/" + n for n in data.registry())
+    assert sorted(str(p.relative_to(cache)) for p in cache.rglob("*")
+                  if p.is_file() and p.parent != cache) == sorted(data.registry())
+
+
+def test_test_suite_without_a_source_skips_naming_files_or_fails_when_required(cache):
+    url = _refused_url()
+    rc, out = _pytest_data_test({"OARAIM_DATA": url}, cache)
+    assert rc == 0 and "1 skipped" in out, out
+    assert "real GNSS files unavailable (15 of 15 failed; looked in the mirror" in out
+    rc, out = _pytest_data_test({"OARAIM_DATA": url, "OARAIM_REQUIRE_DATA": "1"}, cache)
+    assert rc == 1 and "1 error" in out, out  # the fixture fails: the test is an error
+    assert "Connection refused" in out and "(OARAIM_REQUIRE_DATA=1)" in out
+    assert "obs/07590920.05n, obs/07590920.05o, obs/30400920.05n" in out
+    assert "not tried, as almanac/alm_gal_ed259.txt could not be fetched" in out
