@@ -425,7 +425,9 @@ def brdc_candidates(year: int, doy: int) -> list[str]:
 def fetch_daily_nav(date: str, archive: str | None = None, progress: bool = True) -> Path:
     """The IGS merged daily broadcast navigation file of ``date`` (YYYY-MM-DD) in the cache
     (``CACHE/brdc/``), fetched from ``archive`` (default ``OARAIM_BRDC_ARCHIVE`` or
-    ``BRDC_ARCHIVE``) if not cached. No checksum is known beforehand: the sha256 of what was
+    ``BRDC_ARCHIVE``) if not cached. A download is kept only once it reads as a RINEX
+    navigation file (``_check_downloaded_nav``); otherwise one line names the URL and the
+    fault and nothing is cached. No checksum is known beforehand: the sha256 of what was
     downloaded is written beside the file (``FILE.sha256``). Returns the path, which
     ``geometry.load_navigation`` and ``--set nav=PATH`` read as it is."""
     import datetime
@@ -464,34 +466,62 @@ def fetch_daily_nav(date: str, archive: str | None = None, progress: bool = True
     for n in names:
         url = f"{base}{day.year:04d}/{doy:03d}/{n}"
         final = folder / _unz(n)
+        part = folder / (".part-" + n)  # never a cached name until it passed the check
+        unpacked = folder / (".part-" + final.name)
         try:
-            got = _fetch_unverified(url, folder / n, progress)
-        except FileNotFoundError:
-            tried.append(f"{n}: not found")
-            continue
-        except OSError as exc:
-            raise DataUnavailable(f"daily broadcast file of {date}: download from {url} failed: "
-                                  f"{exc}; check the network or give another archive with "
-                                  "--archive URL (or OARAIM_BRDC_ARCHIVE)") from None
-        record = f"{got}  {n}  (downloaded from {url})\n"
-        if n.endswith(".Z"):  # Unix compress: the RINEX readers take plain or gzip files only
-            import ncompress
-
             try:
-                final.write_bytes(ncompress.decompress((folder / n).read_bytes()))
-            except Exception as exc:  # noqa: BLE001 - any codec failure is a bad download
-                final.unlink(missing_ok=True)
-                raise DataUnavailable(f"daily broadcast file of {date}: {url} is not a valid "
-                                      f".Z file ({exc}); give another archive with --archive "
-                                      "URL") from None
-            finally:
-                (folder / n).unlink(missing_ok=True)
-            record += f"{sha256(final)}  {final.name}  (decompressed)\n"
+                got = _fetch_unverified(url, part, progress)
+            except FileNotFoundError:
+                tried.append(f"{n}: not found")
+                continue
+            except OSError as exc:
+                raise DataUnavailable(f"daily broadcast file of {date}: download from {url} "
+                                      f"failed: {exc}; check the network or give another "
+                                      "archive with --archive URL (or OARAIM_BRDC_ARCHIVE)"
+                                      ) from None
+            record = f"{got}  {n}  (downloaded from {url})\n"
+            if n.endswith(".Z"):  # Unix compress: the RINEX readers take plain or gzip only
+                import ncompress
+
+                try:
+                    unpacked.write_bytes(ncompress.decompress(part.read_bytes()))
+                except Exception as exc:  # noqa: BLE001 - any codec failure is a bad download
+                    raise DataUnavailable(f"daily broadcast file of {date}: {url} is not a "
+                                          f"valid .Z file ({exc}); nothing was cached; give "
+                                          "another archive with --archive URL") from None
+                record += f"{sha256(unpacked)}  {final.name}  (decompressed)\n"
+            else:
+                os.replace(part, unpacked)
+            _check_downloaded_nav(unpacked, url, date)
+            os.replace(unpacked, final)
+        finally:
+            part.unlink(missing_ok=True)
+            unpacked.unlink(missing_ok=True)
         final.with_name(final.name + ".sha256").write_text(record)
         return final
     raise DataUnavailable(f"no daily broadcast file of {date} (day {doy:03d}) under "
                           f"{base}{day.year:04d}/{doy:03d}/ ({'; '.join(tried)}); give another "
                           "archive with --archive URL (or OARAIM_BRDC_ARCHIVE)")
+
+
+def _check_downloaded_nav(p: Path, url: str, date: str) -> None:
+    """Refuse a download that is not a readable RINEX navigation file (an archive's HTML error
+    page, a truncated transfer) before it is cached: the structural check the navigation
+    reader itself runs first (``geometry.ephemeris.check_navigation_file``), so a file kept
+    here is one ``--set nav=PATH`` can read."""
+    from oaraim.geometry.ephemeris import NavigationFileError, check_navigation_file
+
+    with open(p, "rb") as f:
+        head = f.read(40)
+    try:
+        if p.name.endswith(".gz") and not head.startswith(b"\x1f\x8b"):  # gzip's magic bytes
+            raise NavigationFileError(f"{p}: not gzip-compressed, it starts with {head!r}")
+        check_navigation_file(p)
+    except NavigationFileError as exc:
+        why = str(exc).removeprefix(f"{p}: ")
+        raise DataUnavailable(f"daily broadcast file of {date}: {url} is not a RINEX "
+                              f"navigation file ({why}); nothing was cached; give another "
+                              "archive with --archive URL (or OARAIM_BRDC_ARCHIVE)") from None
 
 
 def _unz(name: str) -> str:

@@ -235,6 +235,33 @@ def test_cli_data_nav_errors(serve, cache, tmp_path):
     assert r.exit_code == 2 and "Connection refused" in _one_line(r.output)
 
 
+@pytest.mark.parametrize("served", ["html", "observation file", "truncated"])
+def test_cli_data_nav_refuses_a_download_that_is_not_navigation(shared_data, serve, cache,
+                                                                tmp_path, served):
+    """An archive answering with an HTML page, another RINEX type or a cut file: one line
+    naming the URL and what is wrong, and nothing cached (issue 30 item 9)."""
+    day = tmp_path / "archive" / "2010" / "182"
+    day.mkdir(parents=True)
+    nav = (shared_data / "nav/brdc1820.10n").read_bytes()
+    body = {"html": b"<!DOCTYPE html><html><body>Please log in</body></html>\n",
+            "observation file": gzip.compress((shared_data / "obs/07590920.05o").read_bytes()),
+            "truncated": gzip.compress(nav)[:50_000]}[served]
+    name = "BRDC00IGS_R_20101820000_01D_MN.rnx.gz"
+    (day / name).write_bytes(body)
+    url, _ = serve(tmp_path / "archive")
+    r = runner.invoke(app, ["data", "nav", "2010-07-01", "--archive", url, "--no-progress"],
+                      catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    assert line.startswith(f"error: daily broadcast file of 2010-07-01: {url}2010/182/{name} "
+                           "is not a RINEX navigation file (")
+    assert {"html": "not gzip-compressed, it starts with b'<!DOCTYPE html>",
+            "observation file": "type 'O' in column 21",
+            "truncated": "Compressed file ended before the end-of-stream marker"}[served] in line
+    assert "nothing was cached" in line and "--archive URL" in line
+    assert [p for p in cache.rglob("*") if p.is_file()] == []
+
+
 # ----------------------------------------------------------------------- studies, reproduce
 
 
