@@ -7,11 +7,16 @@ top-level folders ``geometry/ araim/ mc/ studies/``; ``pyproject.toml`` installs
 
 float64 is the toolkit's convention (integrity probabilities reach 1e-9, normal matrices are
 ill-conditioned near the edge of availability), so importing any part of oaraim enables JAX's
-64-bit mode, here and only here.
+64-bit mode, here and only here. It also turns on JAX's persistent compilation cache
+(``OARAIM_JAX_CACHE``; ``oaraim/_compile_cache.py``), so a kernel compiles once per machine.
 """
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+from oaraim import _compile_cache  # noqa: E402
+
+_compile_cache.configure()  # JAX's persistent compilation cache (OARAIM_JAX_CACHE)
 
 __version__ = "0.2.0"
