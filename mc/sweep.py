@@ -667,8 +667,9 @@ def _prepare_out_dir(out_dir: Path, manifest: dict, resume: bool):
                 if diffs:
                     raise ValueError(
                         f"cannot resume into {out_dir}: it holds a run with different "
-                        f"parameters: {'; '.join(diffs)}. Pick another --out, or drop --resume "
-                        "to start afresh")
+                        f"parameters: {'; '.join(diffs)}. --resume continues a run with the "
+                        "same parameters only (a narrowed or changed axis is a new run): pick "
+                        "another --out, or drop --resume to start afresh")
     else:
         for f in chunk_dir.iterdir():
             if _CHUNK_RE.match(f.name):

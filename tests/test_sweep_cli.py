@@ -166,11 +166,25 @@ def test_resume_with_another_set_value_refuses_and_names_it(tmp_path, toy):
     assert r.exit_code == 2
     line = _one_line(r)
     assert "params.b" in line and "--resume" in line and "--out" in line
+    assert "a narrowed or changed axis is a new run" in line
     # another chunk size changes no result, so it resumes (nothing left to compute)
     r = _cli("run", TOY.name, "--realizations", "1024", "--out", str(tmp_path), "--no-progress",
              "--set", "chunk=2048", "--resume")
     assert r.exit_code == 0, r.output
     assert _prov(tmp_path / TOY.name)["sweep"]["chunks_computed"] == 0
+
+
+def test_docs_do_not_promise_narrowing_on_resume():
+    """--resume refuses other parameters (above), so no page may say a sweep resumes narrowed:
+    the README once said "sweeps resume and narrow" beside a narrowed --resume command."""
+    readme = (ROOT / "README.md").read_text()
+    sweeps = (ROOT / "docs" / "sweeps.md").read_text()
+    assert "resume and narrow" not in readme
+    for line in readme.splitlines():
+        if "--resume" in line and "--set" in line:
+            raise AssertionError(f"README shows --resume with a changed grid: {line}")
+    assert "continue a killed sweep (same parameters)" in readme
+    assert "a narrowed or changed grid is a new run" in " ".join(sweeps.split())
 
 
 @pytest.mark.dask
