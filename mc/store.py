@@ -7,6 +7,7 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -127,6 +128,27 @@ def _pid_alive(pid):
     return True
 
 
+def check_output_folder(d, option="--out"):
+    """Make sure ``d`` is a folder this process can write: created if needed, a folder, and a
+    file can be made in it. ``OutputError`` with one line naming ``option`` and ``d``
+    otherwise, so a command checks its output folder before it computes anything."""
+    d = Path(d)
+    if d.exists() and not d.is_dir():
+        raise OutputError(f"{option}: {d} exists and is not a folder; choose another {option}")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"{option}: cannot create {d} ({e.strerror or e}); choose a "
+                          f"writable {option}") from None
+    try:
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".oaraim-write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise OutputError(f"{option}: {d} is not writable ({e.strerror or e}); choose a "
+                          f"writable {option}") from None
+
+
 class OutputLock:
     """Exclusive use of a study's output folder for one run (a context manager).
 
@@ -142,13 +164,7 @@ class OutputLock:
 
     def __enter__(self):
         d = self.out_dir
-        if d.exists() and not d.is_dir():
-            raise OutputError(f"--out: {d} exists and is not a folder; choose another --out")
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise OutputError(f"--out: cannot create {d} ({e.strerror or e}); choose a "
-                              "writable --out") from None
+        check_output_folder(d)
         for _ in range(2):
             try:
                 fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)

@@ -159,6 +159,14 @@ def reproduce(
     if quick and results is not None:
         _fail("--results takes the full-size run: drop --quick, or drop --results (a quick run "
               "writes only under --out)")
+    from oaraim.mc.store import OutputError, check_output_folder
+
+    try:  # once, before any study: not one failure per study after its computation
+        check_output_folder(out_dir)
+        if results is not None:
+            check_output_folder(results, "--results")
+    except OutputError as e:
+        _fail(str(e))
     names = list(only or STUDIES)
     unknown = [n for n in names if n not in STUDIES]
     if unknown:

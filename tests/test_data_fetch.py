@@ -344,6 +344,25 @@ def test_reproduce_full_size_writes_report_under_out_or_results(fakes, tmp_path)
     assert r.exit_code == 2 and "--results takes the full-size run" in _one_line(r.output)
 
 
+@pytest.mark.parametrize("where", ["--out a file", "--out under /proc", "--results a file"])
+def test_reproduce_checks_its_output_folders_once_before_any_study(fakes, tmp_path, where):
+    """Before: every study ran, then each failed on the folder (one FAILED line per study).
+    Now: one line naming the option and the folder, exit 2, no study run."""
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    out = {"--out a file": a_file, "--out under /proc": Path("/proc/oaraim-out")}.get(
+        where, tmp_path / "out")
+    extra = ["--results", str(a_file)] if where == "--results a file" else []
+    r = runner.invoke(app, ["reproduce", "--out", str(out), "--no-progress", "--only",
+                            "fake-ok", "--only", "fake-input", *extra], catch_exceptions=False)
+    assert r.exit_code == 2
+    line = _one_line(r.output)
+    option = "--results" if extra else "--out"
+    assert line.startswith(f"error: {option}: ") and str(a_file if where != "--out under /proc"
+                                                         else out) in line
+    assert f"choose a writable {option}" in line or f"choose another {option}" in line
+
+
 def test_cli_source_never_points_at_its_own_folder():
     """The installed CLI computes no path from its own location (no results/ beside it)."""
     import inspect
