@@ -1,8 +1,13 @@
 """RINEX 2/3 observation files and the GNSS pseudorange model of real-data replay.
 
-Reading (``read_observations``): georinex (pinned in constraints.txt) parses; a structural
-check of our own comes first and names the file and what is missing (no header, not an
-observation file, no L1 code observable, no epochs). Returns arrays: GPS times of the epochs
+Reading (``read_observations``): our own reader of the RINEX 2.11 / 3.04 observation format
+(RINEX 2.11 Table A2, RINEX 3.04 Table A3), strict by default: every header record it uses,
+every epoch line, satellite list and F14.3 observation field is checked, each epoch must have
+the lines it announces and a later time than the one before, and the file must end with a line
+break, so a truncated, garbled or duplicated epoch is an ``ObservationFileError`` naming the
+file and line instead of a silently shorter result (georinex, used before, dropped a garbled
+epoch without a word and named no line). ``lenient=True`` skips such epochs and reports each
+one (``ObservationFileWarning``). Returns arrays: GPS times of the epochs
 (receiver time tags; RINEX observation epochs are in GPS time for GPS files), satellite ids,
 L1 code pseudoranges (RINEX 2: C1, gaps filled from P1; RINEX 3: C1C, then C1W / C1P / C1X)
 and the header's APPROX POSITION XYZ. Only GPS is read: Galileo E1 would need its own group
@@ -29,10 +34,14 @@ position estimate (``receiver_terms``); the caller iterates them with its solver
 (``studies.rinex_replay.gnss_replay_inputs``).
 """
 
+import datetime
 import functools
 import gzip
+import math
 import os
+import re
 import warnings
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
@@ -41,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.geometry import atmosphere, gpstime
-from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation, open_rinex_text
+from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation
 from oaraim.geometry.frames import (
     C_M_S,
     _az_el_from_rotation,
@@ -60,7 +69,11 @@ PSEUDORANGE_SPAN_M = (1.8e7, 3.0e7)
 
 
 class ObservationFileError(ValueError):
-    """An observation file that cannot be used: names the file and what is missing."""
+    """An observation file that cannot be used: names the file, the line and what is wrong."""
+
+
+class ObservationFileWarning(UserWarning):
+    """An epoch skipped by ``read_observations(..., lenient=True)``: names the file and line."""
 
 
 class Observations(NamedTuple):
@@ -74,32 +87,112 @@ class Observations(NamedTuple):
     version: float
     marker: str
     path: str
+    skipped: tuple = ()  # lenient reads: one message per skipped epoch (file and line)
 
 
-def check_observation_file(path) -> dict:
-    """Structural check of a RINEX 2/3 observation header before georinex parses the file.
+#: a header longer than this many lines is not a RINEX header
+_MAX_HEADER_LINES = 5000
+#: RINEX satellite system letters (RINEX 3.04 section 3.5); a blank one means GPS in RINEX 2
+_SYSTEMS = "GRECJIS"
+#: one observation field: F14.3 (RINEX 2.11 Table A2, RINEX 3.04 Table A3) or blank
+_OBS_VALUE = re.compile(r" *-?\d*\.\d{3}")  # 14 columns, right-aligned
+#: epoch lines (RINEX 2.11 Table A2: 1X,I2.2,4(1X,I2),F11.7,2X,I1,I3; RINEX 3.04 Table A3:
+#: A1,1X,I4,4(1X,I2.2),F11.7,2X,I1,I3); the date fields may be blank for event flags 2-5
+_EPOCH2 = re.compile(r" (?P<y>[ \d]\d) (?P<mo>[ \d]\d) (?P<d>[ \d]\d) (?P<h>[ \d]\d) "
+                     r"(?P<mi>[ \d]\d)(?P<s> [ \d]\d\.\d{7})  (?P<flag>\d)(?P<n>  \d| \d\d|\d{3})")
+_EPOCH3 = re.compile(r"> (?P<y>\d{4}) (?P<mo>[ \d]\d) (?P<d>[ \d]\d) (?P<h>[ \d]\d) "
+                     r"(?P<mi>[ \d]\d)(?P<s> [ \d]\d\.\d{7})  (?P<flag>\d)(?P<n>  \d| \d\d|\d{3})")
+_EVENT2 = re.compile(r" {28}(?P<flag>[2-5])(?P<n>  \d| \d\d|\d{3})")
+_EVENT3 = re.compile(r"> {30}(?P<flag>[2-5])(?P<n>  \d| \d\d|\d{3})")
+_CLOCK = re.compile(r" *(-?\d*\.\d+)? *")
+_SAT = re.compile(r"[ GRECJIS][ \d]\d")
+_DAY0_ORDINAL = datetime.date(1980, 1, 6).toordinal()
 
-    Returns ``{"version", "types" (per system letter, list of observables), "approx_position"
-    ((3,) or None), "marker", "header_lines"}``. Raises ``ObservationFileError`` naming the file
-    and the line or header record that is missing or malformed.
-    """
-    path = Path(path)
+
+class _Bad(Exception):
+    """A malformed line inside the body: (line number, what is wrong)."""
+
+    def __init__(self, lineno, message):
+        super().__init__(message)
+        self.lineno, self.message = lineno, message
+
+
+def _read_lines(path: Path) -> tuple[list[str], bool]:
+    """The file's lines (plain or .gz; a UTF-8 byte-order mark dropped; bytes that are not ASCII
+    become U+FFFD so that they fail every field check) and whether it ends with a line break."""
     try:
-        with open_rinex_text(path) as f:
-            header = []
-            for line in f:
-                header.append(line.rstrip("\n"))
-                if "END OF HEADER" in line[60:80]:
-                    break
-                if len(header) > 5000:
-                    break
-            body_line = f.readline()
-    except (OSError, EOFError, gzip.BadGzipFile) as e:
+        if path.suffix == ".gz":
+            with gzip.open(path, "rb") as f:
+                raw = f.read()
+        else:
+            raw = path.read_bytes()
+    except (OSError, EOFError, zlib.error) as e:
         raise ObservationFileError(f"{path}: cannot read the file ({e}); check the path and "
                                    "that a .gz file is complete") from None
-    if not header:
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    text = raw.decode("ascii", errors="replace")
+    lines = text.split("\n")
+    ends = text.endswith("\n")
+    if ends:
+        lines.pop()
+    return [s[:-1] if s.endswith("\r") else s for s in lines], ends
+
+
+def _epoch_seconds(lineno, text, year, month, day, hour, minute, second):
+    """GPS seconds of an epoch's date fields (a calendar reading in GPS time); ``_Bad`` naming
+    the line when they are not a valid date and time."""
+    try:
+        date = datetime.date(int(year), int(month), int(day))
+        hour, minute, sec = int(hour), int(minute), float(second)
+        if not (hour < 24 and minute < 60 and sec < 60.0):
+            raise ValueError("hour, minute or second out of range")
+    except ValueError as e:
+        raise _Bad(lineno, f"the epoch time {text.strip()!r} is not a valid date and time "
+                   f"({e})") from None
+    return (date.toordinal() - _DAY0_ORDINAL) * 86400.0 + hour * 3600 + minute * 60 + sec
+
+
+def _match_seconds(lineno, m, year):
+    return _epoch_seconds(lineno, m.group(0)[:m.start("flag") - 2], year, m["mo"], m["d"],
+                          m["h"], m["mi"], m["s"])
+
+
+def _types_block(path, header, k, label, count_cols, types_from, width, pattern):
+    """An observable list of the header that may continue on lines with the same label:
+    (next index, [types]). Errors name the line."""
+    line = header[k]
+    n_txt = line[count_cols[0]:count_cols[1]]
+    if not n_txt.strip().isdigit():
+        raise ObservationFileError(f"{path}: line {k + 1}: {label}: cannot read the number of "
+                                   f"observables {n_txt.strip()!r} (columns "
+                                   f"{count_cols[0] + 1}-{count_cols[1]})")
+    n = int(n_txt)
+    obs = line[types_from:60].split()
+    while len(obs) < n and k + 1 < len(header) and header[k + 1][60:80].strip() == label \
+            and not header[k + 1][:count_cols[1]].strip():
+        k += 1
+        obs += header[k][types_from:60].split()
+    if len(obs) != n or n == 0:
+        raise ObservationFileError(f"{path}: line {k + 1}: {label}: {n} observables announced, "
+                                   f"{len(obs)} listed; the header is malformed")
+    for o in obs:
+        if len(o) != width or not re.fullmatch(pattern, o):
+            raise ObservationFileError(f"{path}: line {k + 1}: {label}: {o!r} is not an "
+                                       "observable code")
+    if len(set(obs)) != len(obs):
+        dup = next(o for o in obs if obs.count(o) > 1)
+        raise ObservationFileError(f"{path}: line {k + 1}: {label}: observable {dup} is listed "
+                                   "twice")
+    return k, obs
+
+
+def _parse_header(path: Path, lines: list[str]) -> dict:
+    """The header facts read_observations needs; ``ObservationFileError`` naming the line of
+    anything missing or malformed."""
+    if not lines or (len(lines) == 1 and not lines[0].strip()):
         raise ObservationFileError(f"{path}: line 1: the file is empty")
-    head = header[0]
+    head = lines[0]
     try:
         version = float(head[:9])
     except ValueError:
@@ -113,14 +206,16 @@ def check_observation_file(path) -> dict:
     if not (2.0 <= version < 4.0):
         raise ObservationFileError(f"{path}: line 1: RINEX version {version:g} is not "
                                    "supported (2.x and 3.x are)")
-    if "END OF HEADER" not in header[-1][60:80]:
-        raise ObservationFileError(f"{path}: line {len(header)}: no 'END OF HEADER' line; the "
-                                   "header is truncated or malformed")
-    if not body_line.strip():
-        raise ObservationFileError(f"{path}: line {len(header) + 1}: no observation epochs "
-                                   "after the header (empty or truncated file)")
+    end = next((k for k, s in enumerate(lines[:_MAX_HEADER_LINES])
+                if "END OF HEADER" in s[60:80]), None)
+    if end is None:
+        n = min(len(lines), _MAX_HEADER_LINES)
+        raise ObservationFileError(f"{path}: line {n}: no 'END OF HEADER' line; the header is "
+                                   "truncated or malformed")
+    header = lines[:end + 1]
     types: dict = {}
-    approx, marker = None, ""
+    approx, marker, interval = None, "", None
+    last_obs = None
     k = 0
     while k < len(header):
         line = header[k]
@@ -134,72 +229,293 @@ def check_observation_file(path) -> dict:
                     f"{line[:42].strip()!r}") from None
         elif label == "MARKER NAME":
             marker = line[:60].strip()
+        elif label == "INTERVAL":
+            try:
+                interval = float(line[:10])
+            except ValueError:
+                interval = math.nan
+            if not (math.isfinite(interval) and interval > 0):
+                raise ObservationFileError(f"{path}: line {k + 1}: INTERVAL "
+                                           f"{line[:10].strip()!r} is not a positive number of "
+                                           "seconds")
+        elif label == "TIME OF LAST OBS":
+            last_obs = (k + 1, line)
         elif label == "# / TYPES OF OBSERV" and version < 3:
-            n = int(line[:6]) if line[:6].strip() else 0
-            obs = line[6:60].split()
-            while len(obs) < n and k + 1 < len(header) and \
-                    header[k + 1][60:80].strip() == "# / TYPES OF OBSERV":
-                k += 1
-                obs += header[k][6:60].split()
-            types.setdefault("G", []).extend(obs)
+            if "G" in types:
+                raise ObservationFileError(f"{path}: line {k + 1}: a second '# / TYPES OF "
+                                           "OBSERV' record: the observables are given twice")
+            k, types["G"] = _types_block(path, header, k, label, (0, 6), 6, 2,
+                                         r"[A-Z][0-9A-Z]")
         elif label == "SYS / # / OBS TYPES" and version >= 3:
             sysch = line[0]
-            n = int(line[3:6]) if line[3:6].strip() else 0
-            obs = line[7:60].split()
-            while len(obs) < n and k + 1 < len(header) and \
-                    header[k + 1][60:80].strip() == "SYS / # / OBS TYPES" and \
-                    not header[k + 1][0].strip():
-                k += 1
-                obs += header[k][7:60].split()
-            types[sysch] = obs
+            if sysch not in _SYSTEMS:
+                raise ObservationFileError(f"{path}: line {k + 1}: SYS / # / OBS TYPES: unknown "
+                                           f"satellite system {sysch!r} in column 1")
+            if sysch in types:
+                raise ObservationFileError(f"{path}: line {k + 1}: the observables of system "
+                                           f"{sysch} are given twice")
+            k, types[sysch] = _types_block(path, header, k, label, (3, 6), 7, 3,
+                                           r"[A-Z][0-9][A-Z]")
         k += 1
     if not types:
         raise ObservationFileError(
-            f"{path}: header lacks '# / TYPES OF OBSERV' (RINEX 2) or 'SYS / # / OBS TYPES' "
-            "(RINEX 3): the observables are unknown")
+            f"{path}: line {end + 1}: the header lacks '# / TYPES OF OBSERV' (RINEX 2) or "
+            "'SYS / # / OBS TYPES' (RINEX 3): the observables are unknown")
     if approx is not None and not (6.0e6 < np.linalg.norm(approx) < 6.5e6):
         approx = None  # a zero or placeholder position is not a position
+    if last_obs is not None:
+        lineno, line = last_obs
+        m = re.fullmatch(r" *(\d{4}) +(\d+) +(\d+) +(\d+) +(\d+) +(\d+\.\d+)", line[:43])
+        if m is None:
+            raise ObservationFileError(f"{path}: line {lineno}: cannot read TIME OF LAST OBS "
+                                       f"{line[:43].strip()!r}")
+        try:
+            last_obs = (lineno, _epoch_seconds(lineno, line[:43], *m.groups()))
+        except _Bad as e:
+            raise ObservationFileError(f"{path}: line {lineno}: {e.message}") from None
     return {"version": version, "types": types, "approx_position": approx, "marker": marker,
-            "header_lines": len(header)}
+            "header_lines": len(header), "interval": interval, "last_obs": last_obs}
+
+
+def check_observation_file(path) -> dict:
+    """Structural check of a RINEX 2/3 observation header.
+
+    Returns ``{"version", "types" (per system letter, list of observables), "approx_position"
+    ((3,) or None), "marker", "header_lines", "interval" (s or None), "last_obs"}``. Raises
+    ``ObservationFileError`` naming the file and the line or header record that is missing or
+    malformed, or an empty body.
+    """
+    path = Path(path)
+    lines, _ = _read_lines(path)
+    info = _parse_header(path, lines)
+    if not any(s.strip() for s in lines[info["header_lines"]:]):
+        raise ObservationFileError(f"{path}: line {info['header_lines'] + 1}: no observation "
+                                   "epochs after the header (empty or truncated file)")
+    return info
+
+
+def _check_values(lineno, line, start, n_fields, max_fields):
+    """Observation fields F14.3 + LLI + SSI (16 columns each) from column ``start``: each blank
+    or a number, indicators blank or a digit, nothing after the last field."""
+    for k in range(n_fields):
+        a = start + 16 * k
+        value, ind = line[a:a + 14], line[a + 14:a + 16]
+        if value.strip() and not _OBS_VALUE.fullmatch(value):
+            raise _Bad(lineno, f"columns {a + 1}-{a + 14}: cannot read {value.strip()!r} as an "
+                       "observation (F14.3: a number with three decimals)")
+        if ind.strip() and not re.fullmatch(r"[ \d]{1,2}", ind):
+            raise _Bad(lineno, f"columns {a + 15}-{a + 16}: loss-of-lock / signal-strength "
+                       f"indicators {ind!r} are not digits")
+    tail = line[start + 16 * max_fields:]
+    if tail.strip():
+        raise _Bad(lineno, f"column {start + 16 * max_fields + 1}: unexpected text "
+                   f"{tail.strip()[:20]!r} after the last observation field")
+
+
+def _values(line, start, indices):
+    """Observation values at field ``indices`` of one satellite's fields (NaN where blank)."""
+    out = []
+    for i in indices:
+        v = line[start + 16 * i:start + 16 * i + 14].strip()
+        out.append(float(v) if v else math.nan)
+    return out
+
+
+def _epoch_v2(path, lines, k, n_types, want):
+    """One RINEX 2 epoch starting at index ``k``: (next index, time or None, {sv: values})."""
+    line = lines[k]
+    m = _EPOCH2.match(line)
+    if m is None:
+        ev = _EVENT2.match(line)
+        if ev is None:
+            raise _Bad(k + 1, f"expected an epoch line ' YY MM DD hh mm ss.sssssss  F NNN' "
+                       f"(RINEX 2.11 Table A2), got {line[:32]!r}")
+        return _skip_records(lines, k, int(ev["n"]), "special records"), None, {}
+    flag, n = int(m["flag"]), int(m["n"])
+    if flag > 6:
+        raise _Bad(k + 1, f"column 29: epoch flag {flag} is not 0-6")
+    yy = int(m["y"])
+    t = _match_seconds(k + 1, m, 2000 + yy if yy < 80 else 1900 + yy)
+    if 2 <= flag <= 5:
+        return _skip_records(lines, k, n, "special records"), None, {}
+    lines_per_sat = max(1, -(-n_types // 5))
+    sats, j = [], k
+    while True:  # 12 satellites per line, continuation lines blank in columns 1-32
+        row = lines[j]
+        take = min(12, n - len(sats))
+        for i in range(take):
+            s = row[32 + 3 * i:35 + 3 * i]
+            if not _SAT.fullmatch(s) or int(s[1:].replace(" ", "0")) == 0:
+                raise _Bad(j + 1, f"columns {33 + 3 * i}-{35 + 3 * i}: {s!r} is not a "
+                           f"satellite (system letter and number; {n} announced in columns 30-32)")
+            sats.append(("G" if s[0] == " " else s[0]) + s[1:].replace(" ", "0"))
+        rest = row[32 + 3 * take:68]
+        if rest.strip():
+            raise _Bad(j + 1, f"column {33 + 3 * take}: {rest.strip()[:12]!r} after the "
+                       f"{n} satellites the epoch announces (columns 30-32)")
+        clock = row[68:]
+        if j > k and clock.strip() or j == k and not _CLOCK.fullmatch(clock):
+            raise _Bad(j + 1, f"columns 69-80: cannot read the receiver clock offset "
+                       f"{clock.strip()[:20]!r}")
+        if len(sats) == n:
+            break
+        j += 1
+        if j >= len(lines):
+            raise _Bad(j, f"the file ends inside the satellite list of the epoch at line "
+                       f"{k + 1}: the file is truncated")
+        if lines[j][:32].strip():
+            raise _Bad(j + 1, f"expected the continuation of the satellite list of the epoch "
+                       f"at line {k + 1} (columns 1-32 blank), got {lines[j][:32]!r}")
+    if len(set(sats)) != len(sats):
+        dup = next(s for s in sats if sats.count(s) > 1)
+        raise _Bad(k + 1, f"satellite {dup} is listed twice in the epoch")
+    j += 1
+    data = {}
+    for i, s in enumerate(sats):
+        rows = lines[j:j + lines_per_sat]
+        if len(rows) < lines_per_sat:
+            raise _Bad(len(lines), f"the file ends inside the epoch at line {k + 1} (the "
+                       f"observations of {s} are missing): the file is truncated")
+        for r, row in enumerate(rows):
+            if _EPOCH2.match(row):
+                raise _Bad(j + r + 1, f"an epoch line where the epoch at line {k + 1} has more "
+                           f"observations ({n} satellites x {lines_per_sat} line(s) announced, "
+                           f"{i} complete): lines are missing")
+            fields = min(5, n_types - 5 * r)
+            _check_values(j + r + 1, row, 0, fields, fields)
+        if flag != 6:  # flag 6: cycle-slip records, not observations
+            data[s] = _values("".join(f"{row:80s}"[:80] for row in rows), 0, want)
+        j += lines_per_sat
+    return j, (None if flag == 6 else t), data
+
+
+def _skip_records(lines, k, n, what):
+    """Skip the ``n`` special records of an event epoch (flags 2-5) at index ``k``; a change
+    of the observables there (flag 4 with a new observable list) is refused."""
+    if k + 1 + n > len(lines):
+        raise _Bad(len(lines), f"the file ends inside the {n} {what} announced at line {k + 1}: "
+                   "the file is truncated")
+    for j in range(k + 1, k + 1 + n):
+        if lines[j][60:80].strip() in ("# / TYPES OF OBSERV", "SYS / # / OBS TYPES"):
+            raise _Bad(j + 1, "the observables change inside the file (an event with new "
+                       "header records); this reader needs one observable list: split the file")
+    return k + 1 + n
+
+
+def _epoch_v3(path, lines, k, types, want):
+    """One RINEX 3 epoch starting at index ``k``: (next index, time or None, {sv: values})."""
+    line = lines[k]
+    m = _EPOCH3.match(line)
+    if m is None:
+        ev = _EVENT3.match(line)
+        if ev is None:
+            raise _Bad(k + 1, f"expected an epoch line '> YYYY MM DD hh mm ss.sssssss  F NNN' "
+                       f"(RINEX 3.04 Table A3), got {line[:35]!r}")
+        return _skip_records(lines, k, int(ev["n"]), "special records"), None, {}
+    flag, n = int(m["flag"]), int(m["n"])
+    if flag > 6:
+        raise _Bad(k + 1, f"column 32: epoch flag {flag} is not 0-6")
+    t = _match_seconds(k + 1, m, int(m["y"]))
+    if 2 <= flag <= 5:
+        return _skip_records(lines, k, n, "special records"), None, {}
+    rest = line[35:]
+    if rest[:6].strip() or not _CLOCK.fullmatch(rest[6:]):
+        raise _Bad(k + 1, f"columns 36-56: cannot read the receiver clock offset "
+                   f"{rest.strip()[:21]!r}")
+    if k + 1 + n > len(lines):
+        raise _Bad(len(lines), f"the file ends inside the epoch at line {k + 1} ({n} satellites "
+                   f"announced, {len(lines) - k - 1} lines present): the file is truncated")
+    data, seen = {}, set()
+    for j in range(k + 1, k + 1 + n):
+        row = lines[j]
+        s = row[:3]
+        if _EPOCH3.match(row):
+            raise _Bad(j + 1, f"an epoch line where the epoch at line {k + 1} has more "
+                       f"satellites ({n} announced, {j - k - 1} present): lines are missing")
+        if not _SAT.fullmatch(s) or s[0] == " " or int(s[1:].replace(" ", "0")) == 0:
+            raise _Bad(j + 1, f"columns 1-3: expected a satellite (system letter and number) of "
+                       f"the epoch at line {k + 1} ({n} announced), got {s!r}")
+        s = s[0] + s[1:].replace(" ", "0")
+        if s[0] not in types:
+            raise _Bad(j + 1, f"satellite {s}: the header lists no observables of system {s[0]}")
+        if s in seen:
+            raise _Bad(j + 1, f"satellite {s} is listed twice in the epoch at line {k + 1}")
+        seen.add(s)
+        nf = len(types[s[0]])
+        _check_values(j + 1, row, 3, nf, nf)
+        if flag != 6 and s[0] == "G":
+            data[s] = _values(row, 3, want)
+    return k + 1 + n, (None if flag == 6 else t), data
+
+
+def _parse_body(path: Path, lines, ends_with_newline, info, codes, lenient):
+    """Every epoch of the body checked; the values of ``codes`` for GPS satellites.
+
+    Returns ``(t (T,), sv (S,), {code: (T, S) NaN where absent}, skipped)``; in strict mode the
+    first problem raises ``ObservationFileError`` naming the line, in lenient mode the epoch
+    holding it is skipped and ``skipped`` gets one message per skipped epoch.
+    """
+    v3 = info["version"] >= 3
+    gps_types = info["types"].get("G", [])
+    want = [gps_types.index(c) for c in codes]  # field indices of the codes
+    n_types = len(gps_types)
+    epoch_re = _EPOCH3 if v3 else _EPOCH2
+    times, rows, skipped = [], [], []
+    last_t, last_line = -math.inf, 0
+    k = info["header_lines"]
+    if not ends_with_newline and lines and lines[-1].strip():
+        problem = (len(lines), "the last line does not end with a line break: the file is "
+                   "truncated (re-download or re-export it)")
+        if not lenient:
+            raise ObservationFileError(f"{path}: line {problem[0]}: {problem[1]}")
+    else:
+        problem = None
+    while k < len(lines):
+        if not lines[k].strip():
+            k += 1
+            continue
+        start = k
+        try:
+            if v3:
+                k, t, data = _epoch_v3(path, lines, k, info["types"], want)
+            else:
+                k, t, data = _epoch_v2(path, lines, k, n_types, want)
+            if problem is not None and k >= problem[0]:
+                raise _Bad(*problem)
+            if t is not None and t <= last_t:
+                raise _Bad(start + 1, "the epoch time is not later than that of the epoch at "
+                           f"line {last_line} ({'the same time' if t == last_t else 'earlier'}): "
+                           "a duplicated or misplaced epoch")
+        except _Bad as e:
+            msg = f"{path}: line {e.lineno}: {e.message}"
+            if not lenient:
+                raise ObservationFileError(msg) from None
+            k = start + 1
+            while k < len(lines) and not epoch_re.match(lines[k]):
+                k += 1
+            skipped.append(f"{msg}; skipped the epoch at line {start + 1} (lines {start + 1}-{k})")
+            continue
+        if t is not None:
+            times.append(t)
+            rows.append(data)
+            last_t, last_line = t, start + 1
+    svs = sorted({s for r in rows for s in r if s[0] == "G"})
+    col = {s: j for j, s in enumerate(svs)}
+    values = {c: np.full((len(times), len(svs)), np.nan) for c in codes}
+    for i, r in enumerate(rows):
+        for s, vals in r.items():
+            if s in col:
+                for c, v in zip(codes, vals, strict=True):
+                    values[c][i, col[s]] = v
+    return np.asarray(times, np.float64), np.array(svs, dtype=str), values, skipped
 
 
 @functools.lru_cache(maxsize=8)
-def _parsed_obs(path_str, mtime_ns, size, codes):
-    import georinex
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # georinex/xarray FutureWarnings
-        try:
-            ds = georinex.load(path_str, use="G", meas=list(codes))
-        except Exception as e:  # georinex raises assorted types; one message for the user
-            raise ObservationFileError(f"{path_str}: georinex could not parse the file "
-                                       f"({type(e).__name__}: {e})") from None
-    svs = np.array([str(s) for s in ds["sv"].values])
-    t = gpstime.from_datetime64(ds["time"].values) if ds.sizes.get("time", 0) else np.zeros(0)
-    data = {c: np.asarray(ds[c].values, np.float64) for c in codes if c in ds}
-    return t, svs, data
-
-
-def read_observations(path, max_epochs=None) -> Observations:
-    """GPS L1 code pseudoranges of a RINEX 2/3 observation file (plain or .gz).
-
-    Args:
-      path: the observation file.
-      max_epochs: keep only the first this many epochs (None: all).
-
-    Returns:
-      ``Observations`` with ``(T, S)`` arrays over epochs x GPS satellites; a satellite that is
-      never observed is dropped. Pseudoranges outside 18,000-30,000 km are marked not valid.
-
-    Raises:
-      ObservationFileError: (a ValueError) naming the file and what is missing: a missing
-        file, a bad header, no GPS L1 code observable (C1 / P1 or C1C / C1W / ...), no epochs.
-    """
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise ObservationFileError(f"observation file {str(path)!r} not found; give an existing "
-                                   "RINEX 2/3 observation file (plain or .gz)")
-    info = check_observation_file(p)
+def _parsed_obs(path_str, mtime_ns, size, lenient):
+    """(header info, L1 codes, parsed body) of a file, cached per (file, mtime, size, lenient)."""
+    p = Path(path_str)
+    lines, ends = _read_lines(p)
+    info = _parse_header(p, lines)
     have = info["types"].get("G", [])
     prefs = RINEX2_L1_CODES if info["version"] < 3 else RINEX3_L1_CODES
     codes = tuple(c for c in prefs if c in have)
@@ -207,44 +523,72 @@ def read_observations(path, max_epochs=None) -> Observations:
         raise ObservationFileError(
             f"{p}: no GPS L1 code observable: the header lists {have or 'no GPS observables'}; "
             f"need one of {', '.join(prefs)}")
+    return info, codes, _parse_body(p, lines, ends, info, codes, lenient)
+
+
+def read_observations(path, max_epochs=None, lenient=False) -> Observations:
+    """GPS L1 code pseudoranges of a RINEX 2/3 observation file (plain or .gz).
+
+    Every line is checked (epoch lines, satellite lists, the F14.3 observation fields, the
+    number of lines each epoch announces, strictly increasing epoch times, a final line
+    break): a truncated, garbled or duplicated epoch is an error naming the file and line,
+    never a silently shorter result.
+
+    Args:
+      path: the observation file.
+      max_epochs: keep only the first this many epochs (None: all; the whole file is checked).
+      lenient: skip bad epochs instead of failing; each skipped epoch gives an
+        ``ObservationFileWarning`` naming the file and line and is listed in ``skipped``.
+
+    Returns:
+      ``Observations`` with ``(T, S)`` arrays over epochs x GPS satellites; a satellite that is
+      never observed is dropped. Pseudoranges outside 18,000-30,000 km are marked not valid.
+
+    Raises:
+      ObservationFileError: (a ValueError) naming the file, the line and what is wrong: a
+        missing file, a bad header, no GPS L1 code observable (C1 / P1 or C1C / C1W / ...), a
+        malformed or truncated epoch, no epochs.
+    """
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise ObservationFileError(f"observation file {str(path)!r} not found; give an existing "
+                                   "RINEX 2/3 observation file (plain or .gz)")
     st = os.stat(p)
-    t, svs, data = _parsed_obs(str(p.resolve()), st.st_mtime_ns, st.st_size, codes)
-    if t.size == 0 or not data:
-        raise ObservationFileError(f"{p}: georinex found no GPS epochs with {', '.join(codes)}")
-    keep_sv = np.array([s.startswith("G") for s in svs])
+    info, codes, (t, svs, data, skipped) = _parsed_obs(str(p.resolve()), st.st_mtime_ns,
+                                                       st.st_size, bool(lenient))
+    for msg in skipped:
+        warnings.warn(msg, ObservationFileWarning, stacklevel=2)
+    if t.size == 0:
+        why = "all skipped" if skipped else "empty or truncated file"
+        raise ObservationFileError(f"{p}: line {info['header_lines'] + 1}: no observation "
+                                   f"epochs after the header ({why})")
+    last = info["last_obs"]
+    if last is not None and t[-1] < last[1] - 1.0:
+        msg = (f"{p}: line {last[0]}: TIME OF LAST OBS is {last[1] - t[-1]:.0f} s after the "
+               "last epoch of the file: the file is truncated")
+        if not lenient:
+            raise ObservationFileError(msg)
+        warnings.warn(msg, ObservationFileWarning, stacklevel=2)
+        skipped = [*skipped, msg]
     pr = np.full((t.size, svs.size), np.nan)
     used = []
     for c in codes:  # preferred code first, later codes only fill its gaps
-        x = data.get(c)
-        if x is None:
-            continue
+        x = data[c]
         fill = ~np.isfinite(pr) & np.isfinite(x)
         if fill.any():
             pr[fill] = x[fill]
             used.append(c)
     ok = np.isfinite(pr) & (pr > PSEUDORANGE_SPAN_M[0]) & (pr < PSEUDORANGE_SPAN_M[1])
-    keep_sv &= ok.any(0)
+    keep_sv = ok.any(0)
     if not keep_sv.any():
         raise ObservationFileError(f"{p}: no plausible GPS {'/'.join(codes)} pseudoranges "
                                    f"(18,000-30,000 km) in {t.size} epochs")
-    order = np.argsort(t, kind="stable")
-    t, pr, ok = t[order], pr[order][:, keep_sv], ok[order][:, keep_sv]
+    pr, ok = pr[:, keep_sv], ok[:, keep_sv]
     if max_epochs is not None:
         t, pr, ok = t[:max_epochs], pr[:max_epochs], ok[:max_epochs]
-    header = _header_interval(p, info)
     return Observations(t, svs[keep_sv], np.where(ok, pr, 0.0), ok, "+".join(used) or codes[0],
-                        info["approx_position"], header, info["version"], info["marker"], str(p))
-
-
-def _header_interval(path, info):
-    try:
-        with open_rinex_text(path) as f:
-            for _, line in zip(range(info["header_lines"]), f, strict=False):
-                if line[60:80].strip() == "INTERVAL":
-                    return float(line[:10])
-    except (OSError, ValueError):
-        pass
-    return None
+                        info["approx_position"], info["interval"], info["version"],
+                        info["marker"], str(p), tuple(skipped))
 
 
 # --------------------------------------------------------------------------- navigation extras

@@ -324,6 +324,10 @@ class RinexReplay(Study):
                        "(LPV-200)", "m"),
         "val_m": Param(35.0, positive, "vertical alert limit (LPV-200)", "m"),
         "fault_modes": fault_modes_param("add-v4.2", "a GNSS receiver follows the current ADD"),
+        "bad_epochs": Param("error", parse_choice("error", "skip"),
+                            "a malformed, truncated or duplicated epoch of the observation file: "
+                            "'error' stops with its file and line, 'skip' leaves it out and "
+                            "lists it (one warning each; skipped_epochs in the summary)"),
         "chunk": Param(BLOCK_EPOCHS, count(1), "accepted for the common study interface and "
                        f"ignored: the replay always runs in blocks of {BLOCK_EPOCHS} epochs "
                        "(one compilation, results independent of any chunking)"),
@@ -331,7 +335,8 @@ class RinexReplay(Study):
 
     def run(self, params, realizations, seed, progress):
         obs_path, nav_path = resolve_files(params["obs"], params["nav"])
-        obs = rinex_obs.read_observations(obs_path, max_epochs=int(realizations))
+        obs = rinex_obs.read_observations(obs_path, max_epochs=int(realizations),
+                                          lenient=params["bad_epochs"] == "skip")
         eph = geometry.load_navigation(nav_path, systems=("G",))
         extras = rinex_obs.navigation_extras(nav_path)
         if params["truth"] == "header":
@@ -394,13 +399,14 @@ class RinexReplay(Study):
         m.update({"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
                   "code": obs.code, "truth_source": truth_src, "truth_ecef_m": list(truth),
                   "iono_model": inp["iono_model"], "mhss_max_order": int(max_order),
-                  "gps_in_file": int(obs.sv.size),
+                  "gps_in_file": int(obs.sv.size), "skipped_epochs": len(obs.skipped),
                   "ephemeris_age_max_s": float(np.abs(inp["ephemeris_age_s"]).max())
                   if n_t else 0.0,
                   "wnls_start_to_truth_median_m": float(np.median(np.linalg.norm(
                       inp["x_ecef_m"] - truth, axis=-1))) if n_t else float("inf")})
         note = (f"no published number (real-data replay, seed 004 VII setup on GPS L1); "
-                f"truth: {truth_src}; {obs.code}, mask {params['mask_deg']:g} deg")
+                f"truth: {truth_src}; {obs.code}, mask {params['mask_deg']:g} deg"
+                + (f"; {len(obs.skipped)} bad epochs skipped" if obs.skipped else ""))
         rows = [
             {"quantity": f"median HPE, {Path(obs.path).name}", "unit": "m", "published": None,
              "reproduced": m["hpe_median_m"], "note": note},
@@ -418,6 +424,7 @@ class RinexReplay(Study):
         ]
         return StudyResult(ds, rows, m, extra_provenance={
             "obs_file": obs.path, "nav_file": str(nav_path), "truth_source": truth_src,
+            "skipped_epochs": list(obs.skipped),
             "fault_modes": params["fault_modes"]})
 
     def plot(self, out_dir):
