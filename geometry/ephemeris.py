@@ -19,14 +19,19 @@ returned so a caller can tighten it. A satellite is used at t only if
 
 GPS records are healthy when the health word is 0; Galileo records when the signal health and
 data-validity bits are all 0 (RINEX 3.04 Table A8). Records with implausible orbits
-(sqrt(A) outside [5000, 5700] m^1/2, e outside [0, 0.3]) are dropped and counted.
+(sqrt(A) outside [5000, 5700] m^1/2, e outside [0, 0.3]) are dropped and counted; a record
+that is no orbit at all (e outside [0, 1), sqrt(A) <= 0, a blank orbital element, a number
+that is not finite), a record given twice, or a second GPS record of a satellite at the same
+t_oc (Galileo: and the same data source) is an error naming the file and line.
 """
 
+import datetime
 import functools
 import gzip
 import os
 import re
 import warnings
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
@@ -61,7 +66,16 @@ E_MAX = 0.3
 
 #: RINEX 3 lines per navigation record by system (RINEX 3.03 Tables A6-A14)
 _RINEX3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
-_FIELD = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([EeDd][-+]?\d+)?\s*$")
+_FIELD = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([EeD][-+]?\d+)?\s*$")
+_INT = re.compile(r"^\s*[-+]?\d+\s*$")
+#: header records georinex reads as numbers: (label, RINEX 3?) -> [(start, end, int?)]
+_HEADER_NUMBERS = {
+    ("ION ALPHA", False): [(2 + 12 * i, 14 + 12 * i, False) for i in range(4)],
+    ("ION BETA", False): [(2 + 12 * i, 14 + 12 * i, False) for i in range(4)],
+    ("IONOSPHERIC CORR", True): [(5 + 12 * i, 17 + 12 * i, False) for i in range(4)],
+    ("TIME SYSTEM CORR", True): [(5, 22, False), (22, 38, False), (38, 45, True),
+                                 (45, 50, True)],
+}
 
 
 class NavigationFileError(ValueError):
@@ -75,15 +89,75 @@ def open_rinex_text(path: Path):
     return open(path, encoding="ascii", errors="replace")
 
 
-def _check_fields(path, lineno, line, start, n_fields):
-    """The 19-character D/E-format numeric fields of a data line: blank or a number."""
+def _check_fields(path, lineno, line, start, n_fields, required=()):
+    """The 19-character D/E-format numeric fields of a data line: blank or a finite number
+    (fields ``required`` not blank). Returns the values (NaN where blank)."""
+    values = []
     for k in range(n_fields):
         a, b = start + 19 * k, start + 19 * (k + 1)
         field = line[a:b]
-        if field.strip() and not _FIELD.match(field):
+        if not field.strip():
+            if k in required:
+                raise NavigationFileError(
+                    f"{path}: line {lineno}, columns {a + 1}-{b}: an orbital element is blank; "
+                    "the record is incomplete (re-download the file or fix that record)")
+            values.append(float("nan"))
+            continue
+        if not _FIELD.match(field):
             raise NavigationFileError(
                 f"{path}: line {lineno}, columns {a + 1}-{b}: cannot read {field.strip()!r} as a "
                 "number; the file is malformed (re-download it or fix that record)")
+        x = float(field.strip().replace("D", "E"))
+        if not np.isfinite(x):
+            raise NavigationFileError(
+                f"{path}: line {lineno}, columns {a + 1}-{b}: {field.strip()!r} is not a finite "
+                "number; the file is malformed (re-download it or fix that record)")
+        values.append(x)
+    return values
+
+
+#: fields that must not be blank in a Keplerian record (GPS, Galileo, BeiDou, QZSS, NavIC),
+#: per data line 1..7: IODE/IODnav and the orbit (Crs .. OmegaDot), IDOT, the health word
+_REQUIRED_KEPLER = {1: (0, 1, 2, 3), 2: (0, 1, 2, 3), 3: (0, 1, 2, 3), 4: (0, 1, 2, 3),
+                    5: (0,), 6: (1,)}
+
+
+#: RINEX 3 GPS / Galileo record layouts georinex maps field by field (fields per line; the
+#: BROADCAST ORBIT 5 and 7 lines may omit spares): anything else is refused, not misread
+_FULL_LINES = (3, 4, 4, 4, 4, None, 4, None)
+_LAST_LINES = {"G": {(4, 1), (4, 2), (4, 3), (4, 4)}, "E": {(3, 1), (4, 1), (4, 2), (4, 4)}}
+
+
+def _check_layout(path, k, sysch, slots):
+    for j, full in enumerate(_FULL_LINES):
+        if full is not None and slots[j] != full:
+            raise NavigationFileError(
+                f"{path}: line {k + j + 1}: {slots[j]} fields where a {_SYSTEM_NAMES[sysch]} "
+                f"record line holds {full}; the line is cut short or garbled")
+    if (slots[5], slots[7]) not in _LAST_LINES[sysch]:
+        raise NavigationFileError(
+            f"{path}: line {k + 6}: {slots[5]} and {slots[7]} fields on the record's lines 6 "
+            f"and 8 (lines {k + 6}, {k + 8}), a layout of a {_SYSTEM_NAMES[sysch]} record this "
+            "reader does not know; the record is cut short or garbled")
+
+
+def _check_epoch(path, lineno, date, rinex3):
+    """A record's t_oc: 'YYYY MM DD hh mm ss' (RINEX 3) or 'YY MM DD hh mm ss.s' (RINEX 2,
+    I2.2,4(1X,I2),F5.1), a valid date and time."""
+    pattern = (r"(\d{4}) ([ \d]\d) ([ \d]\d) ([ \d]\d) ([ \d]\d) ([ \d]\d)" if rinex3 else
+               r" ([ \d]\d) ([ \d]\d) ([ \d]\d) ([ \d]\d) ([ \d]\d)( [ \d]\d\.\d)")
+    m = re.fullmatch(pattern, date)
+    try:
+        if m is None:
+            raise ValueError("not in the record's date format")
+        year = int(m[1]) if rinex3 else 2000 + int(m[1]) if int(m[1]) < 80 else 1900 + int(m[1])
+        sec = float(m[6])
+        datetime.datetime(year, int(m[2]), int(m[3]), int(m[4]), int(m[5]))
+        if not sec < 60:
+            raise ValueError("second out of range")
+    except ValueError as e:
+        raise NavigationFileError(
+            f"{path}: line {lineno}: cannot read the record epoch {date.strip()!r} ({e})") from None
 
 
 def check_navigation_file(path) -> dict:
@@ -96,9 +170,11 @@ def check_navigation_file(path) -> dict:
     """
     path = Path(path)
     try:
-        with open_rinex_text(path) as f:
-            lines = f.read().splitlines()
-    except (OSError, EOFError, gzip.BadGzipFile) as e:
+        with open_rinex_text(path) as f:  # lines end at "\n" only, as georinex reads them
+            lines = [s[:-1] if s.endswith("\r") else s for s in f.read().split("\n")]
+        if lines and not lines[-1]:
+            lines.pop()
+    except (OSError, EOFError, zlib.error) as e:
         raise NavigationFileError(f"{path}: cannot read the file ({e}); check the path and that "
                                   "a .gz file is complete") from None
     if not lines:
@@ -111,7 +187,7 @@ def check_navigation_file(path) -> dict:
             f"{path}: line 1: not a RINEX header (expected 'RINEX VERSION / TYPE' with the "
             f"version in columns 1-9, got {head[:40]!r})") from None
     file_type = head[20:21]
-    if "RINEX VERSION / TYPE" not in head or file_type not in ("N", "n"):
+    if head[60:80].rstrip() != "RINEX VERSION / TYPE" or file_type not in ("N", "n"):
         raise NavigationFileError(
             f"{path}: line 1: not a RINEX navigation file (type {file_type!r} in column 21; "
             "GPS RINEX 2 'N' or RINEX 3 'N' files are supported)")
@@ -123,7 +199,19 @@ def check_navigation_file(path) -> dict:
         raise NavigationFileError(f"{path}: line {len(lines)}: no 'END OF HEADER' line; the "
                                   "header is truncated or malformed")
     rinex3 = version >= 3.0
+    for k in range(1, end):
+        spans = _HEADER_NUMBERS.get((lines[k][60:80].strip(), rinex3), ())
+        if lines[k][:4] == "GAL ":  # Galileo's ionospheric model has three coefficients
+            spans = spans[:3]
+        for a, b, integer in spans:
+            field = lines[k][a:b]
+            x = _INT.match(field) if integer else _FIELD.match(field)
+            if x is None or not integer and not np.isfinite(float(field.replace("D", "E"))):
+                raise NavigationFileError(
+                    f"{path}: line {k + 1}, columns {a + 1}-{b}: cannot read {field.strip()!r} "
+                    f"as a number in the header record {lines[k][60:80].strip()!r}")
     k, records, systems = end + 1, 0, set()
+    seen_text, seen_key, layout = {}, {}, {}
     while k < len(lines):
         line = lines[k]
         if not line.strip():
@@ -149,12 +237,74 @@ def check_navigation_file(path) -> dict:
                 f"line {k + 1} ({line[:3].strip()}): {n_lines} lines expected, "
                 f"{len(lines) - k} present; the file is truncated (re-download it)")
         date = line[4:23] if rinex3 else line[2:22]
-        if not re.fullmatch(r"[\s\d.]+", date):
+        _check_epoch(path, k + 1, date, rinex3)
+        kepler = n_lines == 8
+        if rinex3:
+            _check_fields(path, k + 1, line, first_start, 3)
+            required = _REQUIRED_KEPLER if kepler else {}
+        else:  # georinex reads every field of a RINEX 2 record but the last line's spares
+            _check_fields(path, k + 1, line, first_start, 3, (0, 1, 2))
+            required = {j: (0, 1, 2, 3) for j in range(1, 7)} | {7: (0,)}
+        for j in range(n_lines):
+            text = lines[k + j]
+            bad = next((c for c, ch in enumerate(text) if not " " <= ch <= "~"), None)
+            if bad is None and j > 0 and text[:data_start].strip():
+                bad = 0
+            if bad is None and text[data_start + 76 if j else first_start + 57:].strip():
+                bad = (data_start + 76) if j else first_start + 57
+            if bad is not None:
+                raise NavigationFileError(
+                    f"{path}: line {k + j + 1}, column {bad + 1}: unexpected character "
+                    f"{text[bad]!r} (a record line holds its number fields and blanks only)")
+        orbit = [_check_fields(path, k + j + 1, lines[k + j], data_start, 4,
+                               required.get(j, ()))
+                 for j in range(1, n_lines)]
+        if kepler:  # e and sqrt(A): BROADCAST ORBIT 2, fields 2 and 4
+            e, sqrt_a = orbit[1][1], orbit[1][3]
+            col = data_start + 19
+            if not 0.0 <= e < 1.0:
+                raise NavigationFileError(
+                    f"{path}: line {k + 3}, columns {col + 1}-{col + 19}: eccentricity {e!r} is "
+                    "outside [0, 1): not an orbit (re-download the file or fix that record)")
+            if not sqrt_a > 0.0:
+                col += 38
+                raise NavigationFileError(
+                    f"{path}: line {k + 3}, columns {col + 1}-{col + 19}: sqrt(A) {sqrt_a!r} is "
+                    "not positive: not an orbit (re-download the file or fix that record)")
+        if rinex3:  # georinex joins the lines' fields: each record of a satellite alike
+            slots = tuple(-(-max(len(lines[k + j].rstrip()) - (first_start if j == 0 else
+                                                             data_start), 0) // 19)
+                          for j in range(n_lines))
+            if sysch in ("G", "E"):
+                _check_layout(path, k, sysch, slots)
+            sv_name = line[:3]
+            first = layout.setdefault(sv_name, (slots, k + 1))
+            if first[0] != slots:
+                j = next(j for j in range(n_lines) if slots[j] != first[0][j])
+                raise NavigationFileError(
+                    f"{path}: line {k + j + 1}: {slots[j]} fields where the same line of the "
+                    f"first record of {sv_name} (line {first[1]}) has {first[0][j]}; the line is "
+                    "cut short or garbled")
+        text = tuple(s.rstrip() for s in lines[k:k + n_lines])
+        if text in seen_text:
             raise NavigationFileError(
-                f"{path}: line {k + 1}: cannot read the record epoch {date.strip()!r}")
-        _check_fields(path, k + 1, line, first_start, 3)
-        for j in range(1, n_lines):
-            _check_fields(path, k + j + 1, lines[k + j], data_start, 4)
+                f"{path}: line {k + 1}: the record of {line[:3].strip()} repeats the record at "
+                f"line {seen_text[text]} exactly: a duplicated record (remove one)")
+        seen_text[text] = k + 1
+        # GPS: one record per satellite and t_oc; Galileo: per t_oc and data source (I/NAV and
+        # F/NAV records share a t_oc; BROADCAST ORBIT 5, field 2)
+        key = None
+        if sysch == "G":
+            key = (line[:3].strip(), date)
+        elif sysch == "E":
+            key = (line[:3], date, orbit[4][1])
+        if key is not None:
+            if key in seen_key:
+                raise NavigationFileError(
+                    f"{path}: line {k + 1}: a second record of {line[:3].strip()} at "
+                    f"{date.strip()!r} (the first is at line {seen_key[key]}), with other "
+                    "values: ambiguous (remove one)")
+            seen_key[key] = k + 1
         records += 1
         systems.add(sysch)
         k += n_lines
