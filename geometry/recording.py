@@ -102,12 +102,16 @@ order (or sorted sv_id for GNSS), or the ids given; an absent (epoch, source) is
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import difflib
+import gzip
+import io
 import json
 import math
 import re
 import warnings
+import zlib
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -229,6 +233,8 @@ class _Where:
         if row is not None:
             parts.append(f"row {row} (file line {row + 2})" if self.csv else
                          f"row {row} (counted from 0)")
+        elif self.csv and column is not None:
+            parts.append("header (file line 1)")
         msg = ", ".join(parts) + f": {problem}"
         if fix:
             msg += f". {fix}"
@@ -456,6 +462,16 @@ def _check_table(name: str, df: Any, where: _Where) -> pd.DataFrame:
             r = _first(dup)
             raise where.err(f"tx_id {df['tx_id'].iloc[r]!r} appears twice",
                             "Give each transmitter one row", column="tx_id", row=r)
+        same = ["x_m", "y_m", "z_m", "group"]
+        dup = df.duplicated(same).to_numpy()
+        if dup.any():
+            r = _first(dup)
+            first = _first((df[same] == df[same].iloc[r]).all(axis=1).to_numpy())
+            raise where.err(f"transmitter {df['tx_id'].iloc[r]!r} has the position and clock "
+                            f"group of {df['tx_id'].iloc[first]!r} (row {first}): the same "
+                            "transmitter twice would count as two independent ranges",
+                            "Keep one row per transmitter (co-located antennas of one clock "
+                            "group are one transmitter)", column="tx_id", row=r)
     return df
 
 
@@ -520,13 +536,57 @@ def _find(folder: Path, name: str) -> Path | None:
     return found[0] if found else None
 
 
-def _read(path: Path, name: str) -> pd.DataFrame:
+def _csv_text(path: Path) -> str:
+    """The text of a CSV table, checked line by line before pandas parses it: UTF-8 (a
+    byte-order mark accepted), no NUL, every row with the header's number of fields, and a final
+    line break (a file cut short ends without one). ``RecordingError`` names the file line."""
     try:
-        if path.suffix == ".parquet":
+        raw = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
+    except (OSError, EOFError, zlib.error) as e:
+        raise RecordingError(f"{path}: cannot read the file ({e})", file=str(path)) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        raise RecordingError(f"{path}: file line {line}: not UTF-8 text (byte {e.start}); save "
+                             "the table as UTF-8 CSV", file=str(path)) from None
+    where = _Where(str(path), csv=True)
+
+    def err(line, problem, fix=""):
+        e = where.err(f"file line {line}: {problem}", fix)
+        e.row = line - 2 if line >= 2 else None
+        return e
+
+    if not text.strip():
+        raise err(1, "the file is empty", "Write a header line and one line per row")
+    if "\0" in text:
+        raise err(text[:text.index("\0")].count("\n") + 1, "a NUL character: not a text file")
+    if text and not text.endswith(("\n", "\r")):
+        raise err(text.count("\n") + 1, "the last line does not end with a line break: the file "
+                  "is truncated", "Write the table again (pandas to_csv ends every line)")
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True, skipinitialspace=True)
+    n_fields = None
+    try:
+        for row in reader:
+            if n_fields is None:
+                n_fields = len(row)
+            elif row and len(row) != n_fields:
+                raise err(reader.line_num, f"{len(row)} fields where the header has {n_fields}")
+    except csv.Error as e:
+        raise err(reader.line_num, f"not CSV ({e})") from None
+    if reader.line_num < 2:
+        raise err(2, "no data rows after the header", "Leave the table out if it has no data")
+    return text
+
+
+def _read(path: Path, name: str) -> pd.DataFrame:
+    text = None if path.suffix == ".parquet" else _csv_text(path)
+    try:
+        if text is None:
             return pd.read_parquet(path, engine="pyarrow")
-        text = {c: str for c in SPECS[name].text}
-        return pd.read_csv(path, dtype=text, keep_default_na=False, na_values=[""],
-                           skipinitialspace=True, **_CSV_PRECISION)
+        dtypes = {c: str for c in SPECS[name].text}
+        return pd.read_csv(io.StringIO(text), dtype=dtypes, keep_default_na=False,
+                           na_values=[""], skipinitialspace=True, **_CSV_PRECISION)
     except Exception as e:  # pyarrow / parser errors have many types
         raise RecordingError(f"{path}: cannot read the file ({type(e).__name__}: {e}); write it "
                              f"with pandas to_parquet / to_csv", file=str(path)) from None

@@ -353,7 +353,7 @@ def test_loader_rejects_folder_level_problems(rec, tmp_path):
         R.load_recording(folder)
     (folder / "meta.json").write_text(json.dumps(rec.meta))
     (folder / "truth.csv").write_text("")
-    with pytest.raises(RecordingError, match="cannot read") as e:
+    with pytest.raises(RecordingError, match="truth.csv: file line 1: the file is empty") as e:
         R.load_recording(folder)
     assert e.value.file.endswith("truth.csv")
 
