@@ -117,12 +117,15 @@ def _almanac_ecef(el, t):
 
 
 #: what each almanac field must satisfy (a record breaking one is a parse error naming the
-#: file and line): e in [0, 1) (an orbit), sqrt(A) > 0, integers where the format has them
+#: file and line): e in [0, 1) (an orbit), sqrt(A) > 0, integers in their ranges where the
+#: format has them (RINEX 3 satellite numbers have two digits; the almanac health is 8 bits)
 _FIELD_RULES = {"e": (lambda v: 0.0 <= v < 1.0, "in [0, 1) (an elliptical orbit)"),
                 "sqrt_a": (lambda v: v > 0.0, "> 0 (sqrt of the semi-major axis, sqrt(m))"),
-                "prn": (lambda v: v >= 1 and v == int(v), "a positive integer"),
-                "health": (lambda v: v >= 0 and v == int(v), "an integer >= 0"),
-                "week": (lambda v: v >= 0 and v == int(v), "an integer >= 0"),
+                "prn": (lambda v: 1 <= v <= 99 and v == int(v), "an integer in 1..99"),
+                "health": (lambda v: 0 <= v <= 255 and v == int(v),
+                           "an integer in 0..255 (an 8-bit health word)"),
+                "week": (lambda v: 0 <= v <= 100000 and v == int(v),
+                         "an integer in 0..100000 (a GPS week)"),
                 "toa": (lambda v: 0 <= v < 604800, "in [0, 604800) s of the week")}
 
 
@@ -234,8 +237,9 @@ def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
         cur["_lines"][key] = k
     close(len(lines))
     if not rows:
-        raise AlmanacFileError(f"{p}: no almanac blocks ('******** Week ... almanac for "
-                               "PRN-nn ********'); not a YUMA almanac")
+        raise AlmanacFileError(f"{p}: line {max(len(lines), 1)}: no almanac blocks ('******** "
+                               "Week ... almanac for PRN-nn ********') up to the end of the "
+                               "file; not a YUMA almanac")
     _check_rows(p, rows, lambda i, key: row_lines[i].get(key, "?"))
     return Almanac(_records(rows, system, week_reference_t_gps_s),
                    GPS if system == "G" else GALILEO, p.name)
