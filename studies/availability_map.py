@@ -26,6 +26,8 @@ Conventions (MAAST / ADD defaults; each is a parameter): see ``MAAST_DEFAULTS``.
 
 import csv
 import functools
+import io
+import re
 from pathlib import Path
 
 import jax
@@ -151,26 +153,44 @@ def parse_towers(name, v):
     return str(p.resolve())
 
 
+class TowerFileError(ValueError):
+    """A tower CSV that cannot be used: names the file and the line."""
+
+
 def read_towers(path):
     """Towers of a CSV (lat_deg, lon_deg, height_m, carrier): arrays and the carrier names
     (sorted; carrier k becomes SOP constellation 2 + k). UTF-8, a byte-order mark accepted
-    (Excel's "CSV UTF-8"); a short or long row, a non-number, a value out of range or a row
-    given twice (same position, height and carrier) is a ValueError naming the file and
-    line."""
+    (Excel's "CSV UTF-8"); bytes that are not UTF-8, broken quoting, a short or long row, a
+    non-number, a value out of range, a row given twice (same position, height and carrier) or
+    a last line without its line break (a file cut short) is a ``TowerFileError`` (a
+    ValueError) naming the file and line."""
     need = ("lat_deg", "lon_deg", "height_m", "carrier")
+    raw = Path(path).read_bytes()
     try:
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            reader = csv.reader(f)
-            header = next(reader, None)
-            body = [(reader.line_num, row) for row in reader]
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        raise ValueError(f"tower file {path}: not a UTF-8 text file (byte {e.start}); save it "
-                         "as CSV with the columns " + ", ".join(need)) from None
+        line = raw[:e.start].count(b"\n") + 1
+        raise TowerFileError(f"tower file {path}, line {line}: not UTF-8 text (byte {e.start}); "
+                             "save it as CSV with the columns " + ", ".join(need)) from None
+    control = re.search(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]", text)
+    if control:
+        line = text.count("\n", 0, control.start()) + 1
+        raise TowerFileError(f"tower file {path}, line {line}: control character "
+                             f"{control.group()!r}: not a text CSV")
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    try:
+        header = next(reader, None)
+        body = [(reader.line_num, row) for row in reader]
+    except csv.Error as e:
+        raise TowerFileError(f"tower file {path}, line {reader.line_num}: not CSV ({e})") from None
     header = [h.strip() for h in header] if header else []
     if not body or any(c not in header for c in need):
-        raise ValueError(f"tower file {path}: needs a header with the columns "
-                         f"{', '.join(need)} and at least one row; got "
-                         f"{header if header else 'an empty file'}")
+        raise TowerFileError(f"tower file {path}, line 1: needs a header with the columns "
+                             f"{', '.join(need)} and at least one row; got "
+                             f"{header if header else 'an empty file'}")
+    if not text.endswith(("\n", "\r")):
+        raise TowerFileError(f"tower file {path}, line {text.count(chr(10)) + 1}: the last line "
+                             "does not end with a line break: the file is truncated")
     col = {c: header.index(c) for c in need}
     lat, lon, h, car = [], [], [], []
     seen = {}
@@ -178,24 +198,24 @@ def read_towers(path):
         if not any(x.strip() for x in row):
             continue  # a blank line
         if len(row) != len(header):
-            raise ValueError(f"tower file {path}, line {i}: {len(row)} fields where the header "
-                             f"has {len(header)} ({', '.join(header)})")
+            raise TowerFileError(f"tower file {path}, line {i}: {len(row)} fields where the "
+                                 f"header has {len(header)} ({', '.join(header)})")
         r = {c: row[col[c]].strip() for c in need}
         try:
             la, lo, hh = float(r["lat_deg"]), float(r["lon_deg"]), float(r["height_m"])
         except ValueError:
-            raise ValueError(f"tower file {path}, line {i}: lat_deg, lon_deg and height_m must "
-                             f"be numbers, got {r}") from None
+            raise TowerFileError(f"tower file {path}, line {i}: lat_deg, lon_deg and height_m "
+                                 f"must be numbers, got {r}") from None
         if not (-90 <= la <= 90 and -180 <= lo <= 360 and -500 <= hh <= 9000):
-            raise ValueError(f"tower file {path}, line {i}: lat_deg in [-90, 90], lon_deg in "
-                             f"[-180, 360], height_m in [-500, 9000] m; got {r}")
+            raise TowerFileError(f"tower file {path}, line {i}: lat_deg in [-90, 90], lon_deg "
+                                 f"in [-180, 360], height_m in [-500, 9000] m; got {r}")
         if not r["carrier"]:
-            raise ValueError(f"tower file {path}, line {i}: empty carrier")
+            raise TowerFileError(f"tower file {path}, line {i}: empty carrier")
         key = (la, lo % 360.0, hh, r["carrier"])
         if key in seen:
-            raise ValueError(f"tower file {path}, line {i}: the tower of line {seen[key]} again "
-                             "(same position, height and carrier); one row per transmitter "
-                             "(carriers sharing a mast: one row each)")
+            raise TowerFileError(f"tower file {path}, line {i}: the tower of line {seen[key]} "
+                                 "again (same position, height and carrier); one row per "
+                                 "transmitter (carriers sharing a mast: one row each)")
         seen[key] = i
         lat.append(la)
         lon.append(lo)

@@ -269,16 +269,19 @@ GOOD_TOWERS = "lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.0,0.02,30,B\
 @pytest.mark.parametrize("content, message", [
     (GOOD_TOWERS + "49.99,-0.01\n", r"line 4: 2 fields where the header has 4"),
     (GOOD_TOWERS + "50.01,0.0,40,A\n", r"line 4: the tower of line 2 again"),
-    (b"\x89PNG\r\n\x1a\n\x00\xff\xfe", r"towers\.csv: not a UTF-8 text file"),
+    (b"\x89PNG\r\n\x1a\n\x00\xff\xfe", r"towers\.csv, line 1: not UTF-8 text"),
     (GOOD_TOWERS + "nan,0,10,A\n", r"line 4: lat_deg in \[-90, 90\]"),
-    ("", r"an empty file")])
+    ("", r"an empty file"),
+    (GOOD_TOWERS[:-3], r"line 3: the last line does not end with a line break"),
+    (GOOD_TOWERS + '50.0,0.03,30,"B\n', r"line 4: not CSV"),
+    (GOOD_TOWERS + "50.0,0.03,30,B\x00\n", r"line 4: control character")])
 def test_tower_csv_errors_name_file_and_line(tmp_path, content, message):
     """Issue 30: a short row gave a traceback, a binary file an error without its name, six
-    identical rows six independent SOPs. Each is now one ValueError naming the file (and the
-    line)."""
+    identical rows six independent SOPs, a file cut short lost its last tower, a NUL byte gave
+    a csv.Error. Each is now one TowerFileError (a ValueError) naming the file and the line."""
     f = tmp_path / "towers.csv"
     (f.write_bytes if isinstance(content, bytes) else f.write_text)(content)
-    with pytest.raises(ValueError, match=message) as e:
+    with pytest.raises(am.TowerFileError, match=message) as e:
         am.read_towers(f)
     assert "towers.csv" in str(e.value)
 
