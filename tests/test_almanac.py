@@ -238,3 +238,24 @@ def test_sem_wrong_file_and_bad_values_name_the_line(tmp_path):
     p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 1.5 0 0\n 5153 0 0\n 0 0 0\n0\n9\n")
     with pytest.raises(geometry.AlmanacFileError, match=r"line 7: e = 1\.5 must be in \[0, 1\)"):
         geometry.read_sem(p)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("*", "******** Week 38 almanac for PRN-9999999999999 ********",
+     r"line 1: prn = 9999999999999 must be an integer in 1\.\.99"),
+    ("Health:", "4096", r"line 3: health = 4096\.0 must be an integer in 0\.\.255"),
+    ("week:", "1e12", r"line 14: week = 1000000000000\.0 must be an integer in 0\.\.100000"),
+])
+def test_yuma_integers_out_of_range_name_the_line(shared_data, tmp_path, field, value, message):
+    """A garbled 13-digit PRN passed as "a positive integer" and overflowed the int32 cast (a
+    wrong PRN, a RuntimeWarning found by tests/test_fuzz_parsers.py); PRN, health and week are
+    now checked against their ranges. (The ID line may differ from the header's number: the
+    Galileo almanac alm_gal_ed259.txt has 'SVID- 1' with 'ID: 75'.)"""
+    text = (shared_data / "almanac" / "almyuma_01jan2020.txt").read_text()
+    first = text.split("\n\n")[0].splitlines()
+    k = next(i for i, s in enumerate(first) if s.startswith(field))
+    first[k] = value if field == "*" else f"{field:<28s}{value}"
+    p = tmp_path / "edit.alm"
+    p.write_text("\n".join(first) + "\n")
+    with pytest.raises(geometry.AlmanacFileError, match=r"edit\.alm: " + message):
+        geometry.read_yuma(p)

@@ -179,6 +179,39 @@ def test_malformed_field_and_header(shared_data, tmp_path):
         geometry.load_navigation(tmp_path / "missing.rnx")
 
 
+def _field(line, k, text, start=3):
+    """``line`` with its 19-column field ``k`` (from column ``start``) replaced by ``text``."""
+    a = start + 19 * k
+    return line[:a] + f"{text:>19s}" + line[a + 19:]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda r: r[:2] + [_field(r[2], 1, "0.150000000000D+01")] + r[3:],
+     r"line 11, columns 23-41: eccentricity 1\.5 is outside \[0, 1\)"),
+    (lambda r: r[:2] + [_field(r[2], 3, "-.515480139732D+04")] + r[3:],
+     r"line 11, columns 61-79: sqrt\(A\) -5154\.8\d* is not positive"),
+    (lambda r: r[:2] + [_field(r[2], 3, "")] + r[3:],
+     r"line 11, columns 61-79: an orbital element is blank"),
+    (lambda r: r[:2] + [_field(r[2], 0, "0.1D+999")] + r[3:],
+     r"line 11, columns 4-22: '0\.1D\+999' is not a finite number"),
+    (lambda r: r[:2] + [_field(r[2], 1, "nan")] + r[3:], r"line 11, columns 23-41: cannot read"),
+    (lambda r: r + r[:8], r"line 33: the record of 1 repeats the record at line 9 exactly"),
+    (lambda r: r + r[:3] + [_field(r[3], 0, "0.345700000000D+06")] + r[4:8],
+     r"line 33: a second record of 1 at .* \(the first is at line 9\)"),
+    (lambda r: [r[0][:2] + " 10 13  1  0  0  0.0" + r[0][22:]] + r[1:],
+     r"line 9: cannot read the record epoch '10 13  1  0  0  0\.0' \(month must be"),
+])
+def test_unphysical_or_duplicated_records_name_the_line(shared_data, tmp_path, edit, message):
+    """Issue 30: a record with e >= 1, sqrt(A) <= 0, a blank element or an overflowing number
+    was dropped as "implausible" (or read as 0 / inf) without a word, a duplicated record was
+    taken twice; now each is a NavigationFileError naming the file, the line and the columns."""
+    lines = (shared_data / "nav" / "brdc1820.10n").read_text().splitlines()
+    records = lines[8:8 + 24]
+    p = _write(tmp_path, "edit.10n", "\n".join(lines[:8] + edit(records)) + "\n")
+    with pytest.raises(geometry.NavigationFileError, match=r"edit\.10n: " + message):
+        geometry.load_navigation(p)
+
+
 def test_rinex3_truncated_names_line(shared_data, tmp_path):
     with gzip.open(shared_data / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz", "rt") as f:
         lines = f.read().splitlines()[:200]

@@ -358,6 +358,33 @@ def test_loader_rejects_folder_level_problems(rec, tmp_path):
     assert e.value.file.endswith("truth.csv")
 
 
+@pytest.mark.parametrize("table, edit, message", [
+    ("pseudoranges", lambda b: b[:-4], r"pseudoranges\.csv: file line \d+: the last line does "
+     "not end with a line break: the file is truncated"),
+    ("transmitters", lambda b: b.replace(b"carrier_b", b"carri\xe9r_b"),
+     r"transmitters\.csv: file line 4: not UTF-8 text"),
+    ("pseudoranges", lambda b: b.replace(b"T2", b'"T2', 1),
+     r"pseudoranges\.csv: file line \d+: not CSV \(unexpected end of data\)"),
+    ("pseudoranges", lambda b: b.replace(b"T2", b"T\x002", 1),
+     r"pseudoranges\.csv: file line 3: a NUL character"),
+    ("truth", lambda b: b.replace(b"\n", b",1\n", 3)[:],
+     r"truth\.csv: file line 4: 13 fields where the header has 14"),
+    ("transmitters", lambda b: b + b.split(b"\n")[1].replace(b"T1", b"T9") + b"\n",
+     r"transmitters\.csv, column 'tx_id', row 3 \(file line 5\): transmitter 'T9' has the "
+     r"position and clock group of 'T1' \(row 0\)"),
+])
+def test_csv_cut_short_garbled_or_duplicated_names_the_line(rec, tmp_path, table, edit, message):
+    """Issue 30: a CSV table cut short lost (or truncated) its last row without a word, bytes
+    that are not UTF-8 or a broken quote gave an error without a line, and a transmitter listed
+    again under a new id counted as a second independent range. Each now names the file
+    line."""
+    folder = R.write_recording(tmp_path / "d", rec, format="csv")
+    f = folder / f"{table}.csv"
+    f.write_bytes(edit(f.read_bytes()))
+    with pytest.raises(RecordingError, match=message):
+        R.load_recording(folder)
+
+
 def test_parquet_rows_counted_from_zero(rec, tmp_path):
     tables = {k: v.copy() for k, v in _tables(rec).items()}
     _set("truth", 40, "x_m", np.nan)(tables, None)

@@ -93,6 +93,135 @@ def test_study_without_data_says_how_to_give_files(tmp_path, monkeypatch):
     assert study.validate({"truth": "-3976219.5,3382372.6,3652513"})["truth"][0] == -3976219.5
 
 
+# --------------------------------------------------------------------------- strict reading
+
+
+def _obs_lines(shared_data):
+    """07590920.05o as lines: header lines 1-17, then epochs of 9 lines (8 satellites with one
+    line each) from line 18."""
+    return (shared_data / "obs" / "07590920.05o").read_text().split("\n")
+
+
+def _write_obs(tmp_path, name, lines_or_bytes):
+    p = tmp_path / name
+    if isinstance(lines_or_bytes, bytes):
+        p.write_bytes(lines_or_bytes)
+    else:
+        p.write_text("\n".join(lines_or_bytes))
+    return p
+
+
+def test_obs_file_cut_short_names_the_line(shared_data, tmp_path):
+    """Issue 30: a file cut in half loaded 59 of 60 epochs without a word. Cut mid-line (a
+    download cut short) or at a line break inside an epoch, it is now an error naming the line;
+    lenient reading keeps the complete epochs and names the skipped one."""
+    raw = (shared_data / "obs" / "07590920.05o").read_bytes()
+    half = _write_obs(tmp_path, "half.05o", raw[:len(raw) // 2])
+    with pytest.raises(rinex_obs.ObservationFileError,
+                       match=r"half\.05o: line 543: the last line does not end with a line "
+                       "break: the file is truncated"):
+        rinex_obs.read_observations(half)
+    with pytest.warns(rinex_obs.ObservationFileWarning,
+                      match=r"half\.05o: line 543: .*skipped the epoch at line 543"):
+        obs = rinex_obs.read_observations(half, lenient=True)
+    complete = sum(s.startswith(" 05  4  2") for s in raw.decode().split("\n")[:542])
+    assert obs.t_gps_s.size == complete == 59 and len(obs.skipped) == 1
+    lines = _obs_lines(shared_data)
+    cut = _write_obs(tmp_path, "cut.05o", lines[:17 + 9 * 3 + 4] + [""])
+    with pytest.raises(rinex_obs.ObservationFileError,
+                       match=r"cut\.05o: line 48: the file ends inside the epoch at line 45"):
+        rinex_obs.read_observations(cut)
+
+
+@pytest.mark.parametrize("minute", ["6x", "61"])
+def test_garbled_epoch_time_names_the_line(shared_data, tmp_path, minute):
+    """Issue 30: an epoch with a garbled time was dropped silently (119 of 120 epochs). Strict:
+    an error naming line 63; lenient: the other 119 epochs and a warning naming line 63."""
+    lines = _obs_lines(shared_data)
+    assert lines[62].startswith(" 05  4  2  0  2 30.0000000")
+    lines[62] = lines[62][:13] + minute + lines[62][15:]
+    p = _write_obs(tmp_path, f"garbled{minute}.05o", lines)
+    with pytest.raises(rinex_obs.ObservationFileError, match=r"garbled..\.05o: line 63: "):
+        rinex_obs.read_observations(p)
+    with pytest.warns(rinex_obs.ObservationFileWarning,
+                      match=r"line 63: .*skipped the epoch at line 63 \(lines 63-71\)"):
+        obs = rinex_obs.read_observations(p, lenient=True)
+    assert obs.t_gps_s.size == 119 and 30.0 * 5 not in np.round(obs.t_gps_s - obs.t_gps_s[0])
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda x: x[:26] + x[17:26] + x[26:],
+     r"line 27: the epoch time is not later than that of the epoch at line 18 \(the same time\)"),
+    (lambda x: x[:30] + x[31:],
+     r"line 35: an epoch line where the epoch at line 27 has more observations \(8 satellites"),
+    (lambda x: x[:20] + [x[20][:10] + "x" + x[20][11:]] + x[21:],
+     r"line 21: columns 1-14: cannot read '17984490x035' as an observation"),
+    (lambda x: x[:17] + [x[17][:32] + "G 3G 3" + x[17][38:]] + x[18:],
+     r"line 18: satellite G03 is listed twice"),
+    (lambda x: x[:11] + ["     x    L1    C1    L2    P2" + x[11][30:]] + x[12:],
+     r"line 12: # / TYPES OF OBSERV: cannot read the number of observables 'x'"),
+    (lambda x: x[:11] + [x[11][:30] + "    C1" + x[11][36:]] + x[12:],
+     r"line 12: # / TYPES OF OBSERV: 4 observables announced, 5 listed"),
+])
+def test_malformed_obs_lines_name_the_line(shared_data, tmp_path, edit, message):
+    """A duplicated epoch, a missing satellite line, a garbled value or satellite list, a bad
+    observable count: each an ObservationFileError naming the file and line (before: silently
+    re-sorted, misread or a bare ValueError without file)."""
+    p = _write_obs(tmp_path, "edit.05o", edit(_obs_lines(shared_data)))
+    with pytest.raises(rinex_obs.ObservationFileError, match=r"edit\.05o: " + message):
+        rinex_obs.read_observations(p)
+
+
+def test_obs_reader_matches_georinex_and_accepts_a_bom(shared_data, tmp_path):
+    """Our reader against georinex (the reader used before) on both real files: the same
+    satellites and C1 values; times equal to georinex's to its millisecond resolution
+    (georinex truncates the time tags to ms; ours are exact). A UTF-8 byte-order mark is
+    accepted."""
+    import warnings
+
+    import georinex
+
+    for st in STATIONS:
+        p = shared_data / "obs" / f"{st}.05o"
+        obs = rinex_obs.read_observations(p)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds = georinex.load(p, use="G", meas=["C1"])
+        t_ref = geometry.gpstime.from_datetime64(ds["time"].values)
+        assert obs.t_gps_s.size == t_ref.size == 120
+        assert np.all(np.abs(obs.t_gps_s - t_ref) < 1.001e-3)
+        names = [str(s) for s in ds["sv"].values]
+        for j, s in enumerate(obs.sv):
+            ref = ds["C1"].values[:, names.index(s)]
+            np.testing.assert_array_equal(obs.pseudorange_m[obs.valid[:, j], j],
+                                          ref[obs.valid[:, j]])
+    bom = _write_obs(tmp_path, "bom.05o", b"\xef\xbb\xbf" + p.read_bytes())
+    same = rinex_obs.read_observations(bom)
+    np.testing.assert_array_equal(same.pseudorange_m, obs.pseudorange_m)
+
+
+def test_rinex_replay_bad_epoch_is_one_line_exit_2(shared_data, tmp_path):
+    """The CLI passes a strict-reading error on as one line, exit status 2, no traceback, before
+    any computation; bad_epochs takes error or skip."""
+    from typer.testing import CliRunner
+
+    from oaraim.studies.cli import app
+
+    lines = _obs_lines(shared_data)
+    lines[62] = lines[62][:13] + "6x" + lines[62][15:]
+    obs = _write_obs(tmp_path, "garbled.05o", lines)
+    nav = shared_data / "obs" / "07590920.05n"
+    res = CliRunner().invoke(app, ["run", "rinex-replay", "--set", f"obs={obs}", "--set",
+                                   f"nav={nav}", "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2, res.output
+    out = res.output.strip()
+    assert "Traceback" not in out and "garbled.05o: line 63: expected an epoch line" in out
+    study = STUDIES["rinex-replay"]
+    assert study.validate({"bad_epochs": "skip"})["bad_epochs"] == "skip"
+    with pytest.raises(ValueError, match="bad_epochs"):
+        study.validate({"bad_epochs": "ignore"})
+
+
 # --------------------------------------------------------------------------- shared data
 
 
