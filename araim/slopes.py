@@ -15,12 +15,14 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from oaraim.araim import linalg
 from oaraim.araim.batching import map_chunks
 from oaraim.araim.chi2 import lambda_det_table
+from oaraim.araim.mhss import _unit_norm
 from oaraim.araim.status import Status
-from oaraim.araim.validate import check_probability, check_sigma
+from oaraim.araim.validate import check_probability, check_sigma, check_unit_rows, host_values
 
 N_STATES = 4  # east, north, up, receiver clock
 
@@ -60,7 +62,16 @@ def masked_geometry(g, sigma_m, valid):
     return jnp.where(valid[..., None], g, 0.0), linalg.inverse_variance_weights(sigma_m, valid)
 
 
+def _invalid_input(g, sigma_m, valid):
+    """(...) bool: a valid source has a non-finite or non-unit row (``mhss.UNIT_ROW_TOLERANCE``)
+    or a sigma that is not finite and > 0. Such a geometry gets ``Status.INVALID_INPUT``."""
+    gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
+    ok = _unit_norm(gx * gx + gy * gy + gz * gz) & (sigma_m > 0) & (sigma_m < jnp.inf)
+    return jnp.any(valid & ~ok, axis=-1)
+
+
 def _slopes_kernel(g, sigma_m, valid):
+    invalid = _invalid_input(g, sigma_m, valid)
     g, w = masked_geometry(g, sigma_m, valid)
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
     one = jnp.ones_like(gx)
@@ -76,10 +87,11 @@ def _slopes_kernel(g, sigma_m, valid):
     too_few = dof < 1
     undetectable = jnp.any(valid & ~redundant, axis=-1)
     status = jnp.where(
-        too_few,
-        Status.TOO_FEW_SOURCES,
-        jnp.where(~nonsingular, Status.SINGULAR_GEOMETRY,
-                  jnp.where(undetectable, Status.UNDETECTABLE_FAULT, Status.OK)),
+        invalid,
+        Status.INVALID_INPUT,
+        jnp.where(too_few, Status.TOO_FEW_SOURCES,
+                  jnp.where(~nonsingular, Status.SINGULAR_GEOMETRY,
+                            jnp.where(undetectable, Status.UNDETECTABLE_FAULT, Status.OK))),
     ).astype(jnp.int8)
     failed = status != Status.OK
     slopes = jnp.where(failed[..., None] & valid, jnp.inf, slopes)
@@ -133,10 +145,28 @@ def slopes(g, sigma_m, valid=None) -> Slopes:
     Returns:
       ``Slopes``: per-source slopes (0 for invalid sources), their maximum, dof and status. Where
       the status is not OK the maximum is ``inf``.
+
+    Raises:
+      ValueError naming the argument, the batch index and the source when a valid source has a
+      line-of-sight row that is not finite or not a unit vector (norm within
+      ``mhss.UNIT_ROW_TOLERANCE`` of 1), or a sigma that is not finite and > 0. Under ``jit``
+      such a geometry gets ``Status.INVALID_INPUT`` (slopes and maximum inf) instead.
     """
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
+    return _named_invalid_input(_slopes_chunked(g, sigma_m, valid), g, sigma_m, valid)
+
+
+def _named_invalid_input(result, g, sigma_m, valid):
+    """``result`` when no geometry has ``Status.INVALID_INPUT``; otherwise the ValueError of the
+    host checks, naming the argument, the batch index and the source. The kernel flags, the
+    host names: a clean batch pays one pass over the (...) statuses, not over every row.
+    Traced (the caller is under ``jit``): ``result``, the status says it."""
+    host = host_values(result.status)
+    if host is None or not np.any(host[0] == Status.INVALID_INPUT):
+        return result
     check_sigma(sigma_m, valid)
-    return _slopes_chunked(g, sigma_m, valid)
+    check_unit_rows(g, valid)
+    raise AssertionError("the kernel's INVALID_INPUT and the host checks disagree")
 
 
 def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
@@ -156,11 +186,15 @@ def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
     Returns:
       ``SlopeHPL``. ``hpl_m`` is ``inf`` with a ``Status`` where fewer than 5 sources are valid,
       the geometry is singular, or some source's fault is undetectable; never NaN.
+
+    Raises:
+      ValueError as ``slopes`` does for an unusable row or sigma of a valid source; under
+      ``jit`` that geometry gets ``Status.INVALID_INPUT`` and an infinite HPL instead.
     """
     p_fa = check_probability("p_fa", p_fa)
     p_md = check_probability("p_md", p_md)
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
-    check_sigma(sigma_m, valid)
     n_sources = g.shape[-2]
     table = lambda_det_table(p_fa, p_md, max(n_sources - N_STATES, 1))
-    return _slope_hpl_chunked(g, sigma_m, valid, jnp.asarray(table))
+    return _named_invalid_input(_slope_hpl_chunked(g, sigma_m, valid, jnp.asarray(table)),
+                                g, sigma_m, valid)

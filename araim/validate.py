@@ -68,8 +68,50 @@ def check_sigma(sigma_m, valid):
     bad_mask = v & ~(np.isfinite(s) & (s > 0))
     if np.any(bad_mask):
         bad = s[bad_mask].ravel()[0]
+        where = f" at {batch_source(bad_mask)}" if bad_mask.ndim else ""
         raise ValueError(
-            f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}")
+            f"sigma_m must be finite and > 0 (standard deviations, metres), got {bad!r}{where}")
+
+
+def check_finite_sources(name: str, x, valid, what: str):
+    """ValueError naming ``name``, the batch index and the source where an entry of a valid
+    source is not finite: ``x`` is ``(..., L)`` or ``(..., L, k)`` (a row per source), ``valid``
+    ``(..., L)``; ``what`` says what the values are (units). Padding may hold anything."""
+    a, v = np.asarray(x), np.asarray(valid, bool)
+    ok = np.isfinite(a) if a.ndim == v.ndim else np.all(np.isfinite(a), axis=-1)
+    bad = v & ~ok
+    if np.any(bad):
+        value = a[bad][0]
+        raise ValueError(f"{name} of a valid source is not finite at {batch_source(bad)}: "
+                         f"{np.asarray(value).tolist()!r} ({what}; or mark the source invalid)")
+
+
+def check_unit_rows(g, valid):
+    """ValueError naming ``g``, the batch index and the source where the line-of-sight row of a
+    valid source is not finite or its norm is not within ``UNIT_ROW_TOLERANCE`` of 1: the
+    check and the message of ``protection_levels`` (``mhss._check_inputs``), for the receiver
+    functions that take rows alone (``slopes``, ``slope_hpl``)."""
+    from oaraim.araim.mhss import UNIT_ROW_TOLERANCE, _unit_norm  # mhss imports this module
+
+    gn, v = np.asarray(g), np.asarray(valid, bool)
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = v & ~_unit_norm(np.einsum("...i,...i->...", gn, gn))
+    if np.any(bad):
+        raise ValueError(
+            f"g (line-of-sight rows) of a valid source is not a unit vector at "
+            f"{batch_source(bad)}: {gn[bad][0].tolist()} (rows must be finite with norm within "
+            f"{UNIT_ROW_TOLERANCE} of 1: geometry.geometry_rows, or mark the source invalid)")
+
+
+def host_values(*arrays):
+    """The arrays as NumPy, or None when one is a tracer (the call is being traced under
+    ``jit``/``vmap``: the kernel reports bad inputs as ``Status.INVALID_INPUT`` instead)."""
+    import jax
+
+    try:
+        return [np.asarray(a) for a in arrays]
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return None
 
 
 def batch_source(bad) -> str:

@@ -13,10 +13,16 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from oaraim.araim.linalg import inverse_variance_weights
 from oaraim.araim.status import Status
-from oaraim.araim.validate import check_sigma
+from oaraim.araim.validate import (
+    batch_source,
+    check_finite_sources,
+    check_sigma,
+    host_values,
+)
 
 
 class WNLSResult(NamedTuple):
@@ -47,7 +53,23 @@ def _normal(h, w, empty):
     return n + pad[..., None, :] * jnp.eye(k), hw
 
 
+def _invalid_input(pr, tx, sigma, x0, valid, clock_index, n_clocks):
+    """(...) bool: a valid source with a non-finite pseudorange or transmitter position, a
+    sigma that is not finite and > 0 or a clock group outside 0..n_clocks-1, or a non-finite
+    initial state. Such a geometry gets ``Status.INVALID_INPUT``."""
+    ok = (jnp.isfinite(pr) & jnp.all(jnp.isfinite(tx), axis=-1) & (sigma > 0)
+          & (sigma < jnp.inf) & (clock_index >= 0) & (clock_index < n_clocks))
+    return jnp.any(valid & ~ok, axis=-1) | ~jnp.all(jnp.isfinite(x0), axis=-1)
+
+
 def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m):
+    invalid = _invalid_input(pr, tx, sigma, x0, valid, clock_index, n_clocks)
+    # an unusable input is replaced too, so the iteration stays finite; its outputs are inf
+    valid_ok = valid & ~invalid[..., None]
+    x0 = jnp.where(invalid[..., None], 0.0, x0)
+    pr = jnp.where(valid_ok, pr, 0.0)
+    tx = jnp.where(valid_ok[..., None], tx, 0.0)
+    sigma = jnp.where(valid_ok, sigma, 1.0)
     # padding rows may hold anything (NaN, inf): replace them before any arithmetic
     pr = jnp.where(valid, pr, 0.0)
     tx = jnp.where(valid[..., None], tx, 0.0)
@@ -83,13 +105,19 @@ def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m)
     n_states = 3 + jnp.sum(~empty, axis=-1)
     n_valid = jnp.sum(valid, axis=-1)
     status = jnp.where(
-        n_valid < n_states,
-        Status.TOO_FEW_SOURCES,
-        jnp.where(~ok, Status.SINGULAR_GEOMETRY,
-                  jnp.where(step_norm > tol_m, Status.NOT_CONVERGED, Status.OK)),
+        invalid,
+        Status.INVALID_INPUT,
+        jnp.where(n_valid < n_states, Status.TOO_FEW_SOURCES,
+                  jnp.where(~ok, Status.SINGULAR_GEOMETRY,
+                            jnp.where(step_norm > tol_m, Status.NOT_CONVERGED, Status.OK))),
     ).astype(jnp.int8)
-    return WNLSResult(x[..., :3], x[..., 3:], resid, wsse, n_valid - n_states, step_norm, cov,
-                      status)
+
+    def unusable(a, extra_axes):  # inf where the input is unusable: nothing is claimed
+        return jnp.where(invalid.reshape(invalid.shape + (1,) * extra_axes), jnp.inf, a)
+
+    return WNLSResult(unusable(x[..., :3], 1), unusable(x[..., 3:], 1),
+                      jnp.where(invalid[..., None] & valid, jnp.inf, resid), unusable(wsse, 0),
+                      n_valid - n_states, unusable(step_norm, 0), unusable(cov, 2), status)
 
 
 _wnls_jit = jax.jit(_wnls_kernel, static_argnames=("n_clocks", "n_iter"))
@@ -115,6 +143,13 @@ def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=No
     Returns:
       ``WNLSResult``. A singular step is skipped (the state stays finite) and flagged
       SINGULAR_GEOMETRY; the covariance is then inf.
+
+    Raises:
+      ValueError naming the argument, the batch index and the source when a valid source has a
+      non-finite pseudorange or transmitter position, a sigma that is not finite and > 0 or a
+      clock group outside 0..n_clocks-1, or when ``x0_m`` is not finite. Under ``jit`` such a
+      geometry gets ``Status.INVALID_INPUT`` instead: position, clocks, residuals of valid
+      sources, wsse, last step and covariance inf, never NaN.
     """
     pr = jnp.asarray(pseudorange_m, jnp.float64)
     tx = jnp.asarray(tx_pos_m, jnp.float64)
@@ -124,7 +159,6 @@ def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=No
     if clock_index is None:
         clock_index = jnp.zeros(shape, jnp.int32)
     clock_index = jnp.broadcast_to(jnp.asarray(clock_index, jnp.int32), shape)
-    check_sigma(sigma, valid)
     batch = shape[:-1]
     if x0_m is None:
         x0 = jnp.zeros(batch + (3 + n_clocks,))
@@ -133,5 +167,30 @@ def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=No
         if x0.shape[-1] == 3:
             x0 = jnp.concatenate([x0, jnp.zeros(x0.shape[:-1] + (n_clocks,))], axis=-1)
         x0 = jnp.broadcast_to(x0, batch + (3 + n_clocks,))
-    return _wnls_jit(pr, tx, sigma, x0, valid, clock_index, n_clocks=int(n_clocks),
-                     n_iter=int(n_iter), tol_m=tol_m)
+    res = _wnls_jit(pr, tx, sigma, x0, valid, clock_index, n_clocks=int(n_clocks),
+                    n_iter=int(n_iter), tol_m=tol_m)
+    host = host_values(res.status)
+    if host is not None and np.any(host[0] == Status.INVALID_INPUT):
+        _name_invalid_input(pr, tx, sigma, x0, valid, clock_index, int(n_clocks))
+    return res
+
+
+def _name_invalid_input(pr, tx, sigma, x0, valid, clock_index, n_clocks):
+    """The ValueError of the first unusable input the kernel flagged (``_invalid_input``),
+    naming the argument, the batch index and the source. Run only when a geometry has
+    ``Status.INVALID_INPUT``, so a clean batch pays nothing on the host."""
+    check_finite_sources("pseudorange_m", pr, valid, "metres")
+    check_finite_sources("tx_pos_m", tx, valid, "transmitter positions, metres")
+    check_sigma(sigma, valid)
+    lab, v = np.asarray(clock_index), np.asarray(valid)
+    bad = v & ((lab < 0) | (lab >= n_clocks))
+    if np.any(bad):
+        raise ValueError(f"clock_index must be an integer in 0..{n_clocks - 1} (n_clocks = "
+                         f"{n_clocks}), got {int(lab[bad][0])} at {batch_source(bad)}")
+    x0n = np.asarray(x0)
+    bad0 = ~np.all(np.isfinite(x0n), axis=-1)
+    if np.any(bad0):
+        where = tuple(int(i) for i in np.argwhere(bad0)[0])
+        raise ValueError(f"x0_m (the initial state) is not finite at batch index {where}: "
+                         f"{x0n[where].tolist()}")
+    raise AssertionError("the kernel's INVALID_INPUT and the host checks disagree")

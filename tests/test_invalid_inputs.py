@@ -129,3 +129,97 @@ def test_nonfinite_residual_under_jit_claims_nothing(value):
     s = sep_jit(y)
     assert not bool(np.asarray(s.detected)[1])
     assert np.asarray(s.pl.status)[1] == Status.INVALID_INPUT
+
+
+# ---------------------------------------------- slope RAIM and WNLS (the same treatment)
+
+SIGMA = np.full((B, L), 1.5)
+slope_jit = jax.jit(lambda g, s: araim.slope_hpl(g, s, 1e-5, 1e-3))
+
+
+@pytest.mark.parametrize("fn", ["slope_hpl", "slopes"])
+@pytest.mark.parametrize("row", BAD_ROWS.values(), ids=BAD_ROWS.keys())
+def test_slope_host_refuses_a_bad_row_naming_where(row, fn):
+    """Before: a NaN row gave SINGULAR_GEOMETRY, a (0, 0, 0) row or an ECEF vector a finite
+    HPL with status OK."""
+    g = np.tile(ADD_ROWS, (B, 1, 1))
+    g[1, 3] = row
+    args = (1e-5, 1e-3) if fn == "slope_hpl" else ()
+    with pytest.raises(ValueError, match=r"g \(line-of-sight rows\) of a valid source is not a "
+                                         r"unit vector at batch index \(1,\), source 3"):
+        getattr(araim, fn)(g, SIGMA, *args)
+
+
+def test_slope_host_names_where_a_sigma_is_bad_and_skips_padding():
+    s = SIGMA.copy()
+    s[1, 3] = np.nan
+    with pytest.raises(ValueError, match=r"sigma_m must be finite .*batch index \(1,\), "
+                                         r"source 3"):
+        araim.slope_hpl(np.tile(ADD_ROWS, (B, 1, 1)), s, 1e-5, 1e-3)
+    g = np.tile(ADD_ROWS, (B, 1, 1))
+    g[1, 3] = np.nan
+    valid = np.ones((B, L), bool)
+    valid[1, 3] = False
+    r = araim.slope_hpl(g, s, 1e-5, 1e-3, valid=valid)  # both bad entries are padding
+    assert np.all(np.asarray(r.status) == Status.OK) and np.all(np.isfinite(r.hpl_m))
+
+
+@pytest.mark.parametrize("field, value", [("g", [np.nan, 0.0, 1.0]), ("g", [0.0, 0.0, 0.0]),
+                                          ("sigma", np.inf)])
+def test_slope_kernel_under_jit_reports_invalid_input(field, value):
+    g, s = np.tile(ADD_ROWS, (B, 1, 1)), SIGMA.copy()
+    (g if field == "g" else s)[1, 3] = value
+    r = slope_jit(g, s)
+    status = np.asarray(r.status)
+    assert status[0] == Status.OK and status[1] == Status.INVALID_INPUT
+    assert np.isfinite(np.asarray(r.hpl_m)[0]) and np.asarray(r.hpl_m)[1] == np.inf
+    assert np.asarray(r.slope_max)[1] == np.inf and np.all(np.asarray(r.slopes)[1] == np.inf)
+    _no_nan(r)
+
+
+def _wnls_inputs():
+    """Two epochs of 6 satellites at 20,200 km seen from the Earth's surface (x axis)."""
+    rx = np.array([6.371e6, 0.0, 0.0])
+    az = np.deg2rad([0.0, 60.0, 120.0, 180.0, 240.0, 300.0])
+    el = np.deg2rad([80.0, 40.0, 25.0, 55.0, 30.0, 15.0])
+    los = np.stack([np.sin(el), np.cos(el) * np.sin(az), np.cos(el) * np.cos(az)], -1)
+    tx = np.tile(rx + 2.02e7 * los, (B, 1, 1))
+    pr = np.linalg.norm(tx - rx, axis=-1) + 30.0
+    return pr, tx, np.full((B, 6), 2.0)
+
+
+wnls_jit = jax.jit(lambda pr, tx, s, ci: araim.wnls(pr, tx, s, clock_index=ci))
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("pr", np.nan, r"pseudorange_m of a valid source is not finite at batch index \(1,\), "
+                   r"source 3"),
+    ("tx", np.inf, r"tx_pos_m of a valid source is not finite at batch index \(1,\), source 3"),
+    ("sigma", 0.0, r"sigma_m must be finite and > 0 .*batch index \(1,\), source 3"),
+    ("clock", 1, r"clock_index must be an integer in 0..0 .*got 1 at batch index \(1,\), "
+                 r"source 3")])
+def test_wnls_refuses_on_the_host_and_flags_under_jit(field, value, message):
+    """Before: a NaN pseudorange gave a NaN position with status NOT_CONVERGED or OK; a clock
+    group out of range left the source in no clock column, silently."""
+    pr, tx, s = _wnls_inputs()
+    ci = np.zeros((B, 6), np.int32)
+    {"pr": pr, "tx": tx[..., 0], "sigma": s, "clock": ci}[field][1, 3] = value
+    with pytest.raises(ValueError, match=message):
+        araim.wnls(pr, tx, s, clock_index=ci)
+    r = wnls_jit(pr, tx, s, ci)
+    status = np.asarray(r.status)
+    assert status[0] == Status.OK and status[1] == Status.INVALID_INPUT
+    np.testing.assert_allclose(np.asarray(r.clock_m)[0], [30.0], atol=1e-6)
+    for k in ("position_m", "clock_m", "wsse", "covariance_m2"):
+        assert np.all(np.asarray(getattr(r, k))[1] == np.inf), k
+    assert np.all(np.asarray(r.residual_m)[1] == np.inf)
+    _no_nan(r)
+
+
+def test_wnls_refuses_a_nonfinite_initial_state():
+    pr, tx, s = _wnls_inputs()
+    x0 = np.zeros((B, 3))
+    x0[1, 2] = np.nan
+    with pytest.raises(ValueError, match=r"x0_m \(the initial state\) is not finite at batch "
+                                         r"index \(1,\)"):
+        araim.wnls(pr, tx, s, x0_m=x0)
