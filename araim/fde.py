@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import jit_kernel
+from oaraim.araim.batching import _traced, bucket, jit_kernel, pad_rows, unpad
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
@@ -218,8 +218,15 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
         raise ValueError(f"residual_m of a valid source is not finite at {batch_source(bad)}: "
                          f"{float(np.asarray(y)[bad][0])!r} (mark the source invalid or drop "
                          "the epoch)")
-    return fn(*args, y, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
-              fault_modes=rule)
+    static = dict(budget=budget, max_order=max_order, weighting=all_in_view_weighting,
+                  fault_modes=rule)
+    if bad is None or _traced(args):
+        return fn(*args, y, **static)
+    # padded to a bucket size (araim.batching.bucket): a handful of compiled shapes
+    batch = args[0].shape[:-2]
+    n = int(np.prod(batch, dtype=np.int64))
+    flat = [np.asarray(x).reshape((n,) + x.shape[len(batch):]) for x in (*args, y)]
+    return unpad(fn(*pad_rows(flat, bucket(n)), **static), batch, n)
 
 
 def solution_separation(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,

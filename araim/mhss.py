@@ -45,7 +45,17 @@ from jax.scipy.special import erfc, ndtri
 from scipy import special
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import CHUNK, jit_kernel, map_chunks, map_threads, slice_rows
+from oaraim.araim.batching import (
+    CHUNK,
+    _traced,
+    bucket,
+    jit_kernel,
+    map_chunks,
+    map_threads,
+    pad_rows,
+    slice_rows,
+    unpad,
+)
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
@@ -1026,10 +1036,13 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                             budget, max_order, all_in_view_weighting, iterations,
                             input_flags=False, fault_modes=DEFAULT_RULE,
-                            position_optimization=None):
+                            position_optimization=None, order_flags=False):
     """One flat batch (B, ...) in and out; batch-last inside. ``input_flags``: returns
-    (MHSSResult, ``_input_flags``)."""
+    (MHSSResult, ``_input_flags``); ``order_flags`` (with ``input_flags``) also
+    ``_order_flags``: (MHSSResult, input flags, order flags)."""
     args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
+    more = _order_flags(args[7], args[1], args[5], args[6], budget, fault_modes, max_order) \
+        if order_flags else None
     pr = _project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags,
                   fault_modes=fault_modes)
     if input_flags:
@@ -1047,13 +1060,15 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
         p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl,
         position_adjusted=adjusted)
     out = MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+    if order_flags:
+        return out, flags, more
     return (out, flags) if input_flags else out
 
 
 def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                        budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS,
                        input_flags=False, fault_modes=DEFAULT_RULE,
-                       position_optimization=None):
+                       position_optimization=None, order_flags=False):
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
     cache-sized chunks (``araim.batching``). ``input_flags`` also returns ``_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
@@ -1066,24 +1081,25 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
     def kernel(*xs):
         return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
                                        iterations, input_flags, fault_modes,
-                                       position_optimization)
+                                       position_optimization, order_flags)
 
     return map_chunks(kernel, arrays, batch)
 
 
 _STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags",
-           "fault_modes", "position_optimization")
+           "fault_modes", "position_optimization", "order_flags")
 _protection_levels_jit = jit_kernel(_protection_levels, static_argnames=_STATIC)
 
 
 def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_weighting="int",
                             iterations=PL_ITERATIONS, input_flags=False,
-                            fault_modes=DEFAULT_RULE, position_optimization=None):
+                            fault_modes=DEFAULT_RULE, position_optimization=None,
+                            order_flags=False):
     """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
     program (``araim.batching.map_threads``'s ``part_fn``)."""
     return _protection_levels(*slice_rows(args, start, size), budget, max_order,
                               all_in_view_weighting, iterations, input_flags, fault_modes,
-                              position_optimization)
+                              position_optimization, order_flags)
 
 
 _protection_levels_part_jit = jit_kernel(_protection_levels_part,
@@ -1271,6 +1287,26 @@ def _needs_flat(valid, constellation, p_sat, p_const, budget, rule, order):
     return fm.needs_higher_order | (fm.p_beyond_order > budget.p_thresh)
 
 
+def _order_flags(valid, constellation, p_sat, p_const, budget, rule, order):
+    """(B,) bool, batch-last inputs: True where a geometry needs a template above ``order``,
+    by exactly the test of ``required_order`` (so the batch's required order is ``order``
+    where no geometry is flagged); False everywhere when ``required_order`` could not pick
+    a higher one (its cap, the convention's order, the constellation count)."""
+    B = valid.shape[-1]
+    if rule.events:
+        if min(MAX_AUTO_ORDER, rule.max_order) <= order:
+            return jnp.zeros((B,), bool)
+        fm = event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule, order,
+                                    full=True)
+        return fm.needs_higher_order | (fm.p_beyond_order > budget.p_thresh)
+    if min(MAX_AUTO_ORDER, p_const.shape[0]) <= order:
+        return jnp.zeros((B,), bool)
+    from oaraim.araim.fault_modes import faulty_constellation_tail, group_probabilities
+
+    gp = group_probabilities(valid, constellation, p_sat, p_const)
+    return ~(faulty_constellation_tail(gp.p_fault, order)[order - 1] <= budget.p_thresh)
+
+
 @functools.partial(jax.jit, static_argnames=("budget", "rule", "order"))
 def _needs_higher_order(valid, constellation, p_sat, p_const, budget, rule, order):
     """Whether any geometry of the batch needs a template above ``order`` (event rules)."""
@@ -1349,28 +1385,83 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
         max_order = check_order(rule, check_int("max_order", max_order, 1))
     if threads is not None:
         threads = check_int("threads", threads, 1)
-    # with max_order given, the per-source range checks run inside the kernel (one fused pass
-    # where it reads its inputs; on the host they were ~4 ms of a ~80 ms bench call): a flagged
-    # batch is checked again on the host, which raises naming the argument
+    if _traced((g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid)):
+        return _protection_levels_traced(g, constellation, var_int_m2, var_acc_m2, b_nom_m,
+                                         p_sat, p_const, budget, valid, max_order,
+                                         all_in_view_weighting, rule, opt)
+    flat, batch = host_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
+                              p_const, valid)
+    n = flat[0].shape[0]
+    flat = pad_rows(flat, bucket(n))
+    static = dict(budget=budget, all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
+                  position_optimization=opt)
+    res = None
+    if max_order is None and flat[0].shape[0] <= CHUNK:
+        # one dispatch for a small batch: the kernel at order 1 also says, by the test of
+        # required_order, whether any geometry needs more (then the batch runs again there)
+        res, flags, more = _protection_levels_jit.jitted(*flat, max_order=1, input_flags=True,
+                                                         order_flags=True, **static)
+        max_order = 2 if bool(np.any(np.asarray(more))) else 1
+        if max_order > 1:
+            res, max_order = None, required_order(flat[7], flat[1], flat[5], flat[6], budget,
+                                                  fault_modes=rule)
+    elif max_order is None:
+        max_order = required_order(flat[7], flat[1], flat[5], flat[6], budget,
+                                   fault_modes=rule)
+    if res is None:
+        res, flags = protection_levels_threaded(flat, budget, max_order, all_in_view_weighting,
+                                                threads, input_flags=True, fault_modes=rule,
+                                                position_optimization=opt)
+    if bool(np.any(np.asarray(flags))):  # name the argument, batch index and source
+        x = [a[:n].reshape(batch + a.shape[1:]) for a in flat]
+        _check_inputs(dict(zip(_INPUT_RANGES, x[2:6], strict=True)), x[6], x[1], x[7],
+                      x[6].shape[-1], g=x[0])
+        raise AssertionError("the kernel's input flags and the host checks disagree")
+    return unpad(res, batch, n)
+
+
+def host_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid):
+    """The receiver's arguments as flat NumPy arrays, broadcast to the batch shape of ``g``:
+    ([g (n, L, 3), constellation (n, L) int32, var_int, var_acc, b_nom, p_sat (n, L),
+    p_const (n, C), valid (n, L) bool], batch shape). Checks the shapes and P_const (the
+    per-source checks run inside the kernel, ``_input_flags``). NumPy, not jnp: each jnp
+    conversion or broadcast is a dispatch (~30-60 us), which a single-geometry call cannot
+    afford; the kernel's call moves the arrays to the device at once."""
+    g = np.asarray(g, np.float64)
+    if g.ndim < 2 or g.shape[-1] != 3:
+        raise ValueError(f"g must have shape (..., L, 3) (geometry rows), got {g.shape}")
+    shape = g.shape[:-1]
+    batch = shape[:-1]
+    p_const = np.asarray(p_const, np.float64)
+    if p_const.ndim == 0:
+        raise ValueError("p_const must have a last axis of one entry per constellation (..., C)")
+    C = p_const.shape[-1]
+    p_const = np.broadcast_to(p_const, batch + (C,))
+    _check_inputs({}, p_const, None, None, C, check_sources=False)
+    valid = np.ones(shape, bool) if valid is None else np.broadcast_to(
+        np.asarray(valid, bool), shape)
+    arrays = [g, np.broadcast_to(np.asarray(constellation, np.int32), shape)]
+    arrays += [np.broadcast_to(np.asarray(x, np.float64), shape)
+               for x in (var_int_m2, var_acc_m2, b_nom_m, p_sat)]
+    arrays += [p_const, valid]
+    n = int(np.prod(batch, dtype=np.int64))
+    return [np.ascontiguousarray(x.reshape((n,) + x.shape[len(batch):])) for x in arrays], batch
+
+
+def _protection_levels_traced(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
+                              p_const, budget, valid, max_order, all_in_view_weighting, rule,
+                              opt):
+    """``protection_levels`` inside a caller's trace: the kernel inline, failures as data
+    (INVALID_INPUT), no host checks; ``max_order`` must be given unless the probabilities are
+    concrete."""
     args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                          valid, check_sources=max_order is None)
+                          valid, check_sources=False)
     if max_order is None:
         max_order = required_order(args[7], args[1], args[5], args[6], budget,
                                    fault_modes=rule)
-        return protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                          threads, fault_modes=rule,
-                                          position_optimization=opt)
-    res, flags = protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                            threads, input_flags=True, fault_modes=rule,
-                                            position_optimization=opt)
-    try:
-        flagged = bool(np.any(np.asarray(flags)))
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return res  # traced: the caller validates outside jit
-    if flagged:
-        _check_inputs(dict(zip(_INPUT_RANGES, args[2:6], strict=True)), args[6], args[1],
-                      args[7], args[6].shape[-1], g=args[0])
-        raise AssertionError("the kernel's input flags and the host checks disagree")
+    res, _ = protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
+                                        input_flags=True, fault_modes=rule,
+                                        position_optimization=opt)
     return res
 
 
