@@ -41,22 +41,21 @@ __all__ = [
     "read_yuma", "sky",
 ]
 
-from oaraim.geometry import recording
-from oaraim.geometry.recording import (
-    Recording,
-    RecordingError,
-    example_recording,
-    gnss_matrix,
-    load_recording,
-    pseudorange_matrix,
-    tower_clock_m,
-    write_recording,
-)
+# The recordings' readers and writers need pandas (~0.5 s to import): ``recording`` and its
+# names load on first use (PEP 562), so `import oaraim.geometry` does not pay for them.
+_RECORDING_NAMES = ("Recording", "RecordingError", "example_recording", "gnss_matrix",
+                    "load_recording", "pseudorange_matrix", "tower_clock_m", "write_recording")
+__all__ += ["recording", *_RECORDING_NAMES]
 
-__all__ += [
-    "Recording", "RecordingError", "example_recording", "gnss_matrix", "load_recording",
-    "pseudorange_matrix", "recording", "tower_clock_m", "write_recording",
-]
+
+def __getattr__(name):
+    if name == "recording" or name in _RECORDING_NAMES:
+        import importlib
+
+        module = importlib.import_module("oaraim.geometry.recording")
+        return module if name == "recording" else getattr(module, name)
+    raise AttributeError(f"module 'oaraim.geometry' has no attribute {name!r}")
+
 
 from oaraim.geometry import clocks, imu, trajectory  # noqa: E402
 from oaraim.geometry.imu import ImuSpec, vn100  # noqa: E402
