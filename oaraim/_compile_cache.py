@@ -4,7 +4,7 @@ A kernel compiled once (seconds to tens of seconds per batch shape and static co
 written to disk and read back by the next process, and by the same process after
 ``jax.clear_caches()`` (the test suite clears after every module): the MHSS kernel of the bench
 case compiles in 10-25 s and loads from the cache in 1-5 s (the rest is tracing and lowering,
-which JAX does not cache). docs/performance.md has the measured runs.
+which JAX does not cache). docs/benchmarks.md has the measured runs.
 
 Where: ``OARAIM_JAX_CACHE`` (a folder; ``off`` / ``0`` / ``none`` / ``false`` / ``no``
 disables it), else a compilation-cache folder the user already gave JAX

@@ -143,6 +143,9 @@ class Study:
     realization: str = ""  # what one realization is
     default_realizations: int = 1
     quick_realizations: int = 1
+    #: parameter values of ``--quick`` (``reproduce --quick``) where the user sets none: the
+    #: reduction of a study whose size is a parameter rather than a realization count
+    quick_sets: dict = {}
     #: most realizations one run holds (a study that keeps its realizations in memory; sweep
     #: studies chunk them to disk and have no bound): None = 20 x ``default_realizations``
     max_realizations: int | None = None

@@ -295,6 +295,120 @@ def bench_sky(repeats=3):
     return out
 
 
+#: batch sizes of the latency rows (issue 29: a notebook user and the per-epoch replays)
+LATENCY_BATCHES = (1, 8, 64)
+
+
+def bench_latency(batches=LATENCY_BATCHES, calls=300, fault_modes=None):
+    """Warm ``araim.protection_levels`` calls as a user makes them (NumPy in, the default
+    ``max_order=None`` and fault-mode convention, host checks included, result ready):
+    median and 99th percentile of ``calls`` calls per batch size, after one compiling call
+    per size. The bench geometries (9 GPS + 4 SOPs, Table I)."""
+    from oaraim import araim
+
+    x = {k: np.asarray(v) for k, v in mhss_bench_inputs(max(batches), seed=3).items()}
+    budget = araim.BUDGET_SEED004_TABLE_I
+    out = {"fault_modes": fault_modes or "add-v4.2", "calls": calls, "host": host_info()}
+    for n in batches:
+        a = {k: v[:n] for k, v in x.items()}
+
+        def call(a=a):
+            r = araim.protection_levels(a["g"], a["constellation"], a["var_int_m2"],
+                                        a["var_acc_m2"], a["b_nom_m"], a["p_sat"],
+                                        a["p_const"], budget, a["valid"],
+                                        fault_modes=fault_modes)
+            return r.hpl_m.block_until_ready()
+
+        call()
+        times = []
+        for _ in range(calls):
+            t0 = time.perf_counter()
+            call()
+            times.append(time.perf_counter() - t0)
+        out[f"batch_{n}"] = {"median_ms": 1e3 * float(np.median(times)),
+                             "p99_ms": 1e3 * float(np.percentile(times, 99))}
+    return out
+
+
+_STARTUP_PROBE = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from oaraim import araim
+from oaraim.studies.bench import mhss_bench_inputs
+t1 = time.perf_counter()
+x = mhss_bench_inputs(64, seed=4)
+r = araim.protection_levels(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
+                            x["b_nom_m"], x["p_sat"], x["p_const"],
+                            araim.BUDGET_SEED004_TABLE_I, x["valid"])
+r.hpl_m.block_until_ready()
+print(t1 - t0, time.perf_counter() - t1)
+"""
+
+
+def _python_s(code, env=None, repeats=3):
+    """Best wall time of a fresh interpreter running ``code`` (seconds)."""
+    import subprocess
+    import sys
+
+    def run():
+        subprocess.run([sys.executable, "-c", code], check=True, env=env,
+                       capture_output=True)
+
+    return _best_time(run, repeats)
+
+
+def bench_startup(repeats=3):
+    """What a user waits for before the first result: ``import oaraim``, ``from oaraim import
+    araim, geometry`` and ``oaraim --help`` (best of ``repeats`` fresh interpreters), and the
+    first ``protection_levels`` call on 64 geometries in a new process, compiled (an empty
+    compilation cache) and from the persistent cache (the same folder again)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    out = {"host": host_info(),
+           "import_oaraim_s": _python_s("import oaraim", repeats=repeats),
+           "import_araim_geometry_s": _python_s("from oaraim import araim, geometry",
+                                                repeats=repeats),
+           "cli_help_s": _python_s("import sys; sys.argv = ['oaraim', '--help']\n"
+                                   "from oaraim.studies.cli import main\n"
+                                   "try:\n    main()\nexcept SystemExit:\n    pass",
+                                   repeats=repeats)}
+    folder = tempfile.mkdtemp(prefix="oaraim-bench-cache-")
+    try:
+        env = dict(os.environ, OARAIM_JAX_CACHE=folder)
+        for key in ("first_call_cold_s", "first_call_cached_s"):
+            res = subprocess.run([sys.executable, "-c", _STARTUP_PROBE], check=True, env=env,
+                                 capture_output=True, text=True)
+            out[key] = float(res.stdout.split()[-1])
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return out
+
+
+def bench_fig4(realizations=5_000):
+    """The ``seed004-fig4-hpl-maps`` study end to end at its full size (26 x 13 cells x 6 SOP
+    counts x 5,000 realizations, in a temporary folder, compile included): wall time and
+    draws (cell x realization: one geometry's HPL without and with the SOPs) per second."""
+    import tempfile
+
+    from oaraim.studies.execute import run_sweep_study
+    from oaraim.studies.registry import STUDIES
+
+    study = STUDIES["seed004-fig4-hpl-maps"]
+    params = study.validate({})
+    with tempfile.TemporaryDirectory(prefix="oaraim-bench-fig4-") as tmp:
+        t0 = time.perf_counter()
+        _, sweep = run_sweep_study(study, params, realizations, 0, tmp, progress=False)
+        wall = time.perf_counter() - t0
+    draws = sweep.cells * realizations
+    return {"realizations": realizations, "cells": sweep.cells, "draws": draws, "wall_s": wall,
+            "draws_per_s": draws / wall, "threads": sweep.threads, "host": host_info()}
+
+
 def _rate(x: float, unit: str) -> str:
     return f"{x:,.0f} {unit}"
 
@@ -411,6 +525,27 @@ def markdown_table(bench_json: dict) -> str:
         return machine, h.get("date", "-")
 
     rows = []
+    if "startup" in bench_json:
+        st = bench_json["startup"]
+        rows.append(("start-up: `import oaraim` / `from oaraim import araim, geometry` / "
+                     "`oaraim --help`", "a fresh interpreter, best of 3",
+                     f"{st['import_oaraim_s']:.2f} s / {st['import_araim_geometry_s']:.2f} s / "
+                     f"{st['cli_help_s']:.2f} s", "-", "-", *host(st)))
+        rows.append(("first `araim.protection_levels` call in a new process",
+                     "9 GPS + 4 SOPs, batch 64, `add-v4.2`",
+                     f"{st['first_call_cold_s']:.1f} s compiling, "
+                     f"{st['first_call_cached_s']:.1f} s from the compilation cache", "-", "-",
+                     *host(st)))
+    if "latency" in bench_json:
+        lat = bench_json["latency"]
+        for key in sorted((k for k in lat if k.startswith("batch_")),
+                          key=lambda k: int(k.split("_")[1])):
+            n = int(key.split("_")[1])
+            rows.append(("`araim.protection_levels` latency, warm, NumPy in",
+                         f"9 GPS + 4 SOPs, batch {n}, `{lat['fault_modes']}`, "
+                         "`max_order=None`",
+                         f"median {lat[key]['median_ms']:.2f} ms, p99 {lat[key]['p99_ms']:.2f} ms",
+                         "-", "-", *host(lat)))
     if "slope_hpl" in bench_json:
         s = bench_json["slope_hpl"]
         rows.append(("slope HPL (seed 001), `araim.slope_hpl` kernel",
@@ -469,6 +604,13 @@ def markdown_table(bench_json: dict) -> str:
                          f"`{a.get('fault_modes', 'grouped')}`",
                          f"{a['wall_s']:.1f} s wall ({_rate(a['pl_per_s'], 'PL/s')})", "-",
                          "-", *host(a)))
+    if "fig4" in bench_json:
+        f = bench_json["fig4"]
+        rows.append(("`seed004-fig4-hpl-maps` study, full size, compile included",
+                     f"{f['cells']:,} cells x {f['realizations']:,} realizations, "
+                     f"{f['threads']} threads",
+                     f"{f['wall_s']:.1f} s wall ({_rate(f['draws_per_s'], 'draws/s')})", "-",
+                     "-", *host(f)))
     if "integrity_risk" in bench_json:
         r = bench_json["integrity_risk"]
         rows.append(("MHSS detection + exclusion per residual sample, `araim.integrity_risk."

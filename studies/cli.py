@@ -53,7 +53,9 @@ def list_studies():
         # text is not Rich markup
         out.print(f"[bold]{name}[/]  {escape(s.title)}", highlight=False)
         out.print(f"  one realization: {s.realization}; default {s.default_realizations:,}, "
-                  f"quick {s.quick_realizations:,}", highlight=False, markup=False)
+                  f"quick {s.quick_realizations:,}" + "".join(
+                      f", {k}={v}" for k, v in s.quick_sets.items()),
+                  highlight=False, markup=False)
         if isinstance(s, SweepStudy):
             out.print(f"  sweep over {' x '.join(s.axis_names)} (--resume, --workers N, "
                       "--scheduler ADDRESS); realizations are per cell", highlight=False,
@@ -236,12 +238,26 @@ def bench(
     dask_map: Annotated[bool, typer.Option(
         "--dask-map", help="also the 1 x 1 deg, 24 h availability map on a local Dask cluster "
         "of 2 worker processes (minutes)")] = False,
+    fig4: Annotated[bool, typer.Option(
+        "--fig4", help="also seed004-fig4-hpl-maps at its full size (minutes)")] = False,
 ):
     """Throughput of the kernels and the NumPy reference in the same run."""
     from oaraim.studies import bench as b
 
-    res = {"slope_hpl": b.bench_slope_hpl(batch=65_536 if quick else 262_144,
-                                          ref_geometries=500 if quick else 2_000)}
+    st = b.bench_startup()
+    out.print(f"start-up: import oaraim {st['import_oaraim_s']:.2f} s, from oaraim import "
+              f"araim, geometry {st['import_araim_geometry_s']:.2f} s, oaraim --help "
+              f"{st['cli_help_s']:.2f} s; first protection_levels call (64 geometries) in a new "
+              f"process {st['first_call_cold_s']:.1f} s compiling, "
+              f"{st['first_call_cached_s']:.1f} s from the compilation cache", highlight=False)
+    lat = b.bench_latency(calls=100 if quick else 300)
+    out.print("protection_levels latency (warm, " + lat["fault_modes"] + "): " + ", ".join(
+        f"batch {n}: median {lat[f'batch_{n}']['median_ms']:.2f} ms, p99 "
+        f"{lat[f'batch_{n}']['p99_ms']:.2f} ms" for n in b.LATENCY_BATCHES), highlight=False)
+
+    res = {"startup": st, "latency": lat}
+    res["slope_hpl"] = b.bench_slope_hpl(batch=65_536 if quick else 262_144,
+                                          ref_geometries=500 if quick else 2_000)
     s = res["slope_hpl"]
     out.print(f"slope HPL (M + N = 9): {s['jax_hpl_per_s']:,.0f} HPL/s "
               f"(batch {s['batch']:,}, best of 5)", highlight=False)
@@ -315,6 +331,11 @@ def bench(
         out.print(f"availability-map 1 x 1 deg on Dask (2 workers), {a['users']:,} users x "
                   f"{a['epochs']} epochs: {a['wall_s']:.1f} s wall ({a['pl_per_s']:,.0f} PL/s)",
                   highlight=False)
+    if fig4:
+        res["fig4"] = f = b.bench_fig4()
+        out.print(f"seed004-fig4-hpl-maps full size ({f['cells']:,} cells x "
+                  f"{f['realizations']:,}): {f['wall_s']:.1f} s wall, compile included "
+                  f"({f['draws_per_s']:,.0f} draws/s)", highlight=False)
     if json_out is not None:
         json_out.write_text(json.dumps(res, indent=2) + "\n")
 

@@ -84,7 +84,10 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
     paths, wall time in s). Sweep studies also take ``resume``, ``workers``, ``scheduler``."""
     study = get_study(name)
     _check_sweep_flags(study, resume, workers, scheduler)
-    params = study.validate(parse_sets(sets))
+    overrides = parse_sets(sets)
+    if quick:
+        overrides = {**study.quick_sets, **overrides}
+    params = study.validate(overrides)
     fixed = study.fixed_realizations(params)
     if fixed is not None:
         if realizations is not None and realizations != fixed:
