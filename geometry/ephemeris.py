@@ -25,9 +25,11 @@ that is not finite), a record given twice, or a second GPS record of a satellite
 t_oc (Galileo: and the same data source) is an error naming the file and line.
 """
 
+import collections
 import datetime
 import functools
 import gzip
+import io
 import os
 import re
 import warnings
@@ -80,13 +82,6 @@ _HEADER_NUMBERS = {
 
 class NavigationFileError(ValueError):
     """A navigation file that cannot be read: names the file, the line and how to fix it."""
-
-
-def open_rinex_text(path: Path):
-    """A RINEX file (plain or .gz) as ASCII text; undecodable bytes become U+FFFD."""
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", encoding="ascii", errors="replace")
-    return open(path, encoding="ascii", errors="replace")
 
 
 def _check_fields(path, lineno, line, start, n_fields, required=()):
@@ -152,12 +147,27 @@ def _check_epoch(path, lineno, date, rinex3):
             raise ValueError("not in the record's date format")
         year = int(m[1]) if rinex3 else 2000 + int(m[1]) if int(m[1]) < 80 else 1900 + int(m[1])
         sec = float(m[6])
-        datetime.datetime(year, int(m[2]), int(m[3]), int(m[4]), int(m[5]))
+        day = datetime.datetime(year, int(m[2]), int(m[3]), int(m[4]), int(m[5]))
         if not sec < 60:
             raise ValueError("second out of range")
     except ValueError as e:
         raise NavigationFileError(
             f"{path}: line {lineno}: cannot read the record epoch {date.strip()!r} ({e})") from None
+    return gpstime.gps_seconds(day.year, day.month, day.day, day.hour, day.minute, sec)
+
+
+def _navigation_text(path: Path) -> str:
+    """The file (plain or .gz) as the text both the check and georinex read: a UTF-8
+    byte-order mark dropped, bytes that are not ASCII as U+FFFD (so that they fail the field
+    checks instead of being dropped and shifting columns), line ends as "\n"."""
+    try:
+        raw = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
+    except (OSError, EOFError, zlib.error) as e:
+        raise NavigationFileError(f"{path}: cannot read the file ({e}); check the path and that "
+                                  "a .gz file is complete") from None
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    return raw.decode("ascii", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
 
 
 def check_navigation_file(path) -> dict:
@@ -168,15 +178,13 @@ def check_navigation_file(path) -> dict:
     record whose first line is not a record start, a non-numeric field, or a file that ends
     inside a record (truncated download).
     """
-    path = Path(path)
-    try:
-        with open_rinex_text(path) as f:  # lines end at "\n" only, as georinex reads them
-            lines = [s[:-1] if s.endswith("\r") else s for s in f.read().split("\n")]
-        if lines and not lines[-1]:
-            lines.pop()
-    except (OSError, EOFError, zlib.error) as e:
-        raise NavigationFileError(f"{path}: cannot read the file ({e}); check the path and that "
-                                  "a .gz file is complete") from None
+    return _check_navigation_text(Path(path), _navigation_text(Path(path)))
+
+
+def _check_navigation_text(path: Path, text: str) -> dict:
+    lines = text.split("\n")
+    if lines and not lines[-1]:
+        lines.pop()
     if not lines:
         raise NavigationFileError(f"{path}: line 1: the file is empty")
     head = lines[0]
@@ -211,7 +219,7 @@ def check_navigation_file(path) -> dict:
                     f"{path}: line {k + 1}, columns {a + 1}-{b}: cannot read {field.strip()!r} "
                     f"as a number in the header record {lines[k][60:80].strip()!r}")
     k, records, systems = end + 1, 0, set()
-    seen_text, seen_key, layout = {}, {}, {}
+    seen_text, seen_key, layout, index = {}, {}, {}, []
     while k < len(lines):
         line = lines[k]
         if not line.strip():
@@ -237,7 +245,7 @@ def check_navigation_file(path) -> dict:
                 f"line {k + 1} ({line[:3].strip()}): {n_lines} lines expected, "
                 f"{len(lines) - k} present; the file is truncated (re-download it)")
         date = line[4:23] if rinex3 else line[2:22]
-        _check_epoch(path, k + 1, date, rinex3)
+        toc_s = _check_epoch(path, k + 1, date, rinex3)
         kepler = n_lines == 8
         if rinex3:
             _check_fields(path, k + 1, line, first_start, 3)
@@ -305,13 +313,16 @@ def check_navigation_file(path) -> dict:
                     f"{date.strip()!r} (the first is at line {seen_key[key]}), with other "
                     "values: ambiguous (remove one)")
             seen_key[key] = k + 1
+        sv_id = sysch + line[1:3].replace(" ", "0") if rinex3 else f"G{int(line[:2]):02d}"
+        index.append((sv_id, round(float(toc_s), 3), k + 1))
         records += 1
         systems.add(sysch)
         k += n_lines
     if records == 0:
         raise NavigationFileError(f"{path}: line {len(lines)}: the file has a header but no "
                                   "navigation records")
-    return {"version": version, "records": records, "systems": sorted(systems)}
+    return {"version": version, "records": records, "systems": sorted(systems),
+            "index": index}
 
 
 _SYSTEM_NAMES = {"G": "GPS", "E": "Galileo"}
@@ -328,7 +339,8 @@ def georinex_navigation(path_str: str, mtime_ns: int, size: int, systems: tuple)
     """
     import georinex
 
-    info = check_navigation_file(path_str)
+    text = _navigation_text(Path(path_str))
+    info = _check_navigation_text(Path(path_str), text)
     use = [s for s in systems if s in info["systems"]]
     if not use:
         wanted = " or ".join(_SYSTEM_NAMES.get(s, s) for s in systems)
@@ -338,8 +350,9 @@ def georinex_navigation(path_str: str, mtime_ns: int, size: int, systems: tuple)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # georinex/xarray FutureWarnings on merge defaults
         try:
-            ds = georinex.load(path_str, use=use) if info["version"] >= 3 else georinex.load(
-                path_str)
+            # georinex reads the checked text, not the file: the same lines, a BOM dropped
+            ds = (georinex.load(io.StringIO(text), use=use) if info["version"] >= 3
+                  else georinex.load(io.StringIO(text)))
         except Exception as e:  # georinex raises assorted types; one message for the user
             raise NavigationFileError(f"{path_str}: georinex could not parse the file "
                                       f"({type(e).__name__}: {e})") from None
@@ -354,8 +367,20 @@ def _parsed_records(path_str: str, mtime_ns: int, size: int, systems: tuple):
     RINEX 2 GPS file); a study, a test module or the benchmark that loads the same file again
     gets it from here.
     """
-    _, ds = georinex_navigation(path_str, mtime_ns, size, systems)
-    return _record_table(ds, systems, path_str)
+    info, ds = georinex_navigation(path_str, mtime_ns, size, systems)
+    table = _record_table(ds, systems, path_str)
+    # every checked record must be in georinex's result (georinex skips what it cannot read,
+    # e.g. "malformed line", with a log message only)
+    got = collections.Counter(zip(table["sv"].tolist(), np.round(table["toc_s"], 3).tolist(),
+                                  strict=True))
+    for sv_id, toc_s, lineno in info["index"]:
+        if sv_id[0] not in systems:
+            continue
+        if got[(sv_id, toc_s)] == 0:
+            raise NavigationFileError(f"{path_str}: line {lineno}: georinex did not read the "
+                                      f"record of {sv_id}; the record is malformed")
+        got[(sv_id, toc_s)] -= 1
+    return table
 
 
 def _var(ds, name, n_time, n_sv):

@@ -212,6 +212,18 @@ def test_unphysical_or_duplicated_records_name_the_line(shared_data, tmp_path, e
         geometry.load_navigation(p)
 
 
+def test_byte_order_mark_accepted_and_georinex_reads_the_checked_text(shared_data, tmp_path):
+    """A UTF-8 byte-order mark (an editor's "UTF-8 with BOM") was "not a RINEX header"; the
+    file is read as checked, so the records are the same as without it."""
+    src = shared_data / "nav" / "brdc1820.10n"
+    p = tmp_path / "bom.10n"
+    p.write_bytes(b"\xef\xbb\xbf" + src.read_bytes())
+    a, b = geometry.load_navigation(src), geometry.load_navigation(p)
+    assert list(a.prns) == list(b.prns) and a.n_records.tolist() == b.n_records.tolist()
+    for k in ("sqrt_a", "e", "toe_s", "af0"):
+        np.testing.assert_array_equal(a._params[k], b._params[k])
+
+
 def test_rinex3_truncated_names_line(shared_data, tmp_path):
     with gzip.open(shared_data / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz", "rt") as f:
         lines = f.read().splitlines()[:200]
