@@ -85,11 +85,15 @@ Every problem raises :class:`RecordingError` (a ``ValueError``) with ``.file``, 
 counted from 0 over the data rows (for CSV the message also gives the file line, header = line
 1). Checked: missing meta.json / table / required column (all required columns are listed);
 partial column groups; unparseable values; NaN or inf in any known column (an optional column is
-either absent or complete); empty tables; ids missing or empty; duplicate tx_id; time order
+either absent or complete); empty tables; ids missing or empty; duplicate tx_id, or a
+transmitter with the position and clock group of another (the same transmitter twice); time order
 (imu, truth strictly increasing; pseudoranges, gnss non-decreasing); duplicate (t_s, tx_id) or
 (t_s, sv_id); unknown transmitter ids; sigma_m <= 0; el_deg out of range; malformed sv_id;
 ECEF positions closer than 6000 km to the Earth's centre (ENU written as ECEF); non-unit
 quaternions; meta.json format, version, origin, GPS time, imu_rate_hz against the IMU steps.
+A CSV table is checked as text first, naming the file line: UTF-8 (a byte-order mark accepted),
+no NUL, valid quoting, every row with the header's number of fields, at least one data row, and
+a final line break (a file cut short ends without one).
 Extra columns are allowed and kept (Parquet keeps their types; CSV infers them); an extra
 column whose name is close to a known optional column that is absent (``sigma`` for
 ``sigma_m``) gives a :class:`RecordingWarning`. Numeric columns become float64, id columns text.
