@@ -2,12 +2,14 @@
 
 Each case takes a short excerpt of a real file (the header and the first few records or
 epochs: small enough that a case costs milliseconds, large enough that every kind of line is
-there), applies one to three mutations drawn by hypothesis (truncation at a byte, a bit flipped,
-a line deleted or duplicated, a field replaced by garbage: a letter, ``nan``, ``inf``, an
-overflow, a sign, a blank) and reads the result. Every case must either give a complete,
-valid result (every number finite, elements physical, no duplicate satellite or transmitter)
-or raise the reader's own error (a ``ValueError`` subclass) whose message names the file and a
-line; any other exception fails the test, and so does a result holding a NaN.
+there; the shared data hold no RINEX 3 observation or SEM file, so the observation excerpt is
+also written as RINEX 3 and the YUMA excerpt as SEM), applies one to three mutations drawn by
+hypothesis (truncation at a byte, a bit flipped, a line deleted or duplicated, a field replaced
+by garbage: a letter, ``nan``, ``inf``, an overflow, a sign, a blank) and reads the result.
+Every case must either give a complete, valid result (every number finite, elements physical,
+no duplicate satellite or transmitter) or raise the reader's own error (a ``ValueError``
+subclass) whose message names the file and a line; any other exception fails the test, and so
+does a result holding a NaN.
 
 Cases per reader: ``OARAIM_FUZZ_EXAMPLES`` (default 500) for the readers through georinex or
 pandas, twice that for the pure-Python ones (docs/errors.md gives the counts and times
@@ -179,6 +181,33 @@ def rinex_obs_excerpt(shared_data):
 
 
 @pytest.fixture(scope="module")
+def rinex3_obs_excerpt(rinex_obs_excerpt):
+    """The same three epochs written as RINEX 3.03 (the shared data hold no RINEX 3 observation
+    file): observables L1C C1C L2W C2W, epoch lines '> YYYY MM DD hh mm ss', one line per
+    satellite starting with its id."""
+    lines = rinex_obs_excerpt.decode().split("\n")
+    end = next(k for k, s in enumerate(lines) if "END OF HEADER" in s)
+    head = ["     3.03           OBSERVATION DATA    G                   RINEX VERSION / TYPE"]
+    for s in lines[1:end + 1]:
+        label = s[60:80].strip()
+        if label == "# / TYPES OF OBSERV":
+            s = f"{'G    4 L1C C1C L2W C2W':60s}SYS / # / OBS TYPES"
+        elif label in ("WAVELENGTH FACT L1/2", "RINEX VERSION / TYPE"):
+            continue
+        head.append(s)
+    body, k = [], end + 1
+    while k < len(lines) and lines[k].strip():
+        e = lines[k]
+        n = int(e[29:32])
+        sats = [e[32 + 3 * i:35 + 3 * i].replace(" ", "0") for i in range(n)]
+        body.append(f"> 20{e[1:3]} {int(e[4:6]):02d} {int(e[7:9]):02d} {int(e[10:12]):02d} "
+                    f"{int(e[13:15]):02d}{e[15:26]}  {e[28]}{n:3d}")
+        body += [sat + lines[k + 1 + i] for i, sat in enumerate(sats)]
+        k += 1 + n
+    return ("\n".join(head + body) + "\n").encode()
+
+
+@pytest.fixture(scope="module")
 def yuma_excerpt(shared_data):
     """almyuma_01jan2020.txt: the first three satellite blocks."""
     text = (shared_data / "almanac" / "almyuma_01jan2020.txt").read_bytes()
@@ -285,6 +314,28 @@ def test_fuzz_rinex_observations(cases, rinex_obs_excerpt, mutations):
         _check_observations(lenient)
         assert list(lenient.skipped) == skipped
     cases.note("rinex obs", "ok" if strict is not None else
+               "error" if lenient is None else "error, lenient skipped")
+
+
+@fuzz(2)
+@given(mutations=MUTATIONS)
+def test_fuzz_rinex3_observations(cases, rinex3_obs_excerpt, mutations):
+    """The RINEX 3 epoch format: the same strict / lenient contract."""
+    assert rinex_obs.read_observations(cases.write(rinex3_obs_excerpt, ".rnx")).t_gps_s.size == 3
+    path = cases.write(mutate(rinex3_obs_excerpt, mutations), ".rnx")
+    strict = expect_parse_error(rinex_obs.ObservationFileError, path,
+                                lambda: rinex_obs.read_observations(path))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        lenient = expect_parse_error(rinex_obs.ObservationFileError, path,
+                                     lambda: rinex_obs.read_observations(path, lenient=True))
+    for w in caught:
+        if w.category is rinex_obs.ObservationFileWarning:
+            assert path.name in str(w.message) and LINE.search(str(w.message)), w.message
+    for obs in (strict, lenient):
+        if obs is not None:
+            _check_observations(obs)
+    cases.note("rinex3 obs", "ok" if strict is not None else
                "error" if lenient is None else "error, lenient skipped")
 
 
