@@ -188,6 +188,8 @@ class Seed004Uav(Study):
                    "--realizations N: the first N)")
     default_realizations = PUBLISHED_EPOCHS
     quick_realizations = PUBLISHED_EPOCHS
+    #: --quick: the whole flight (the Fig. 7 ramp included) at a quarter of the epoch rate
+    quick_sets = {"n_epochs": PUBLISHED_EPOCHS // 4}
     test_realizations = 400
     nav_file = NAV_FILE
     params = {
