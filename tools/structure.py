@@ -1,0 +1,210 @@
+"""The structure check of docs/design.md: private names across files, import cycles, file sizes.
+
+    python tools/structure.py            # report; exit status 1 if a rule is broken
+    python tools/structure.py --json     # the numbers, for docs/design.md and the tests
+
+It reads the package's source folders (``pyproject.toml``'s ``[tool.setuptools.package-dir]``)
+with ``ast`` and imports nothing, so it also runs on a tree that does not import.
+
+- A *private cross-file import* is a name starting with one underscore that one package module
+  takes from another: ``from oaraim.araim.mhss import _project``, or ``mhss._project`` where
+  ``mhss`` is an imported package module. Dunders (``__version__``) are not private. A
+  package's ``__init__.py`` may gather its own private modules (``from oaraim.araim._x import
+  y``: the module is private, the name is not), which is how a public face is built.
+- An *import cycle* is a strongly connected component of the module graph with more than one
+  module, where every import counts, also the ones inside functions ("lazy"), since a lazy
+  import still ties the two modules together. ``import oaraim.x`` makes the importing module
+  depend on ``oaraim/x`` only; the package ``__init__`` modules that just re-export are edges
+  like any other.
+- The *largest file* is counted in lines; the rule is at most ``MAX_LINES``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the largest package file allowed, in lines (issue 26)
+MAX_LINES = 700
+
+
+def package_dirs(root: Path = ROOT) -> dict[str, Path]:
+    """Dotted package name -> its source folder, as pyproject.toml installs them."""
+    cfg = tomllib.loads((root / "pyproject.toml").read_text())
+    dirs = cfg["tool"]["setuptools"]["package-dir"]
+    return {name: root / folder for name, folder in dirs.items()}
+
+
+def modules(root: Path = ROOT) -> dict[str, Path]:
+    """Dotted module name -> file, for every .py file of the package (subfolders included)."""
+    out = {}
+    for pkg, folder in package_dirs(root).items():
+        for path in sorted(folder.rglob("*.py")):
+            rel = path.relative_to(folder).with_suffix("")
+            parts = [p for p in rel.parts if p != "__init__"]
+            name = ".".join([pkg, *parts]) if parts else pkg
+            if any(name.startswith(other + ".") and other != pkg and folder in
+                   package_dirs(root)[other].parents for other in package_dirs(root)):
+                continue  # (a folder nested in another package's folder is that package's)
+            out.setdefault(name, path)
+    return out
+
+
+def _resolve(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    if not node.level:
+        return node.module or ""
+    base = module.split(".")
+    base = base if is_package else base[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def scan(root: Path = ROOT):
+    """(edges, private, sizes): module -> imported package modules; the private cross-file
+    imports as (module, line, text); module -> line count."""
+    mods = modules(root)
+    known = set(mods)
+
+    def owner(name: str) -> str | None:  # the longest known module that is name or its prefix
+        while name:
+            if name in known:
+                return name
+            name = name.rpartition(".")[0]
+        return None
+
+    edges: dict[str, set[str]] = {m: set() for m in mods}
+    private: list[tuple[str, int, str]] = []
+    sizes = {}
+    for mod, path in mods.items():
+        text = path.read_text()
+        sizes[mod] = text.count("\n") + (0 if text.endswith("\n") else 1)
+        tree = ast.parse(text, filename=str(path))
+        is_pkg = path.name == "__init__.py"
+        aliases: dict[str, str] = {}  # local name -> package module it names
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    tgt = owner(a.name)
+                    if tgt and tgt != mod:
+                        edges[mod].add(tgt)
+                        if a.asname:
+                            aliases[a.asname] = tgt
+            elif isinstance(node, ast.ImportFrom):
+                src = _resolve(node, mod, is_pkg)
+                for a in node.names:
+                    full = f"{src}.{a.name}"
+                    if full in known:  # from package import module
+                        if full != mod:
+                            edges[mod].add(full)
+                        aliases[a.asname or a.name] = full
+                        continue
+                    tgt = owner(src)
+                    if tgt is None or tgt == mod:
+                        continue
+                    edges[mod].add(tgt)
+                    if _is_private(a.name) and not _gathers(mod, is_pkg, tgt):
+                        private.append((mod, node.lineno, f"from {src} import {a.name}"))
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and _is_private(node.attr)
+                    and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and aliases[node.value.id] != mod):
+                tgt = aliases[node.value.id]
+                if not _gathers(mod, is_pkg, tgt):
+                    private.append((mod, node.lineno, f"{node.value.id}.{node.attr}"))
+    return edges, sorted(set(private)), sizes
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _gathers(mod: str, is_pkg: bool, target: str) -> bool:
+    """A package __init__ taking a name from one of its own (private) modules."""
+    return is_pkg and target.startswith(mod + ".")
+
+
+def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index, low, on, stack, out = {}, {}, set(), [], []
+    counter = [0]
+    for start in sorted(edges):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(edges[start])))]
+        index[start] = low[start] = counter[0]
+        counter[0] += 1
+        stack.append(start)
+        on.add(start)
+        while work:
+            v, it = work[-1]
+            for w in it:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(edges.get(w, ())))))
+                    break
+                if w in on:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        out.append(sorted(comp))
+    return sorted(out)
+
+
+def report(root: Path = ROOT) -> dict:
+    """The numbers: private cross-file imports, cycles, the largest files."""
+    edges, private, sizes = scan(root)
+    cyc = cycles(edges)
+    largest = sorted(sizes.items(), key=lambda kv: -kv[1])
+    return {
+        "modules": len(sizes),
+        "private_imports": [f"{m}:{line}: {text}" for m, line, text in private],
+        "cycles": cyc,
+        "largest": [[m, n] for m, n in largest[:10]],
+        "over_max_lines": [[m, n] for m, n in largest if n > MAX_LINES],
+        "max_lines": MAX_LINES,
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    args = ap.parse_args(argv)
+    rep = report()
+    if args.json:
+        print(json.dumps(rep, indent=1))
+    else:
+        print(f"{rep['modules']} modules")
+        print(f"private cross-file imports: {len(rep['private_imports'])}")
+        for line in rep["private_imports"]:
+            print("  " + line)
+        print(f"import cycles (lazy imports counted): {len(rep['cycles'])}")
+        for comp in rep["cycles"]:
+            print(f"  {len(comp)} modules: " + " ".join(comp))
+        print(f"files above {MAX_LINES} lines: {len(rep['over_max_lines'])}")
+        for m, n in rep["over_max_lines"]:
+            print(f"  {m}: {n}")
+    broken = rep["private_imports"] or rep["cycles"] or rep["over_max_lines"]
+    return 1 if broken else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
