@@ -47,8 +47,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from oaraim.constants import C_M_S
 from oaraim.geometry.clocks import S_WDT_OCXO_S, S_WDTDOT_OCXO_PER_S, clock_transition
-from oaraim.geometry.frames import C_M_S
 
 N_ERR = 17
 TH, POS, VEL, BG, BA, CLK = (slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15),

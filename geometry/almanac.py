@@ -23,12 +23,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from oaraim.constants import MU_GAL_M3_S2, MU_GPS_M3_S2
 from oaraim.geometry import gpstime
 from oaraim.geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
 from oaraim.geometry.kepler import (
     GPS_PI,
-    MU_GAL_M3_S2,
-    MU_GPS_M3_S2,
     OrbitElements,
     orbit_ecef,
 )

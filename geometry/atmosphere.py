@@ -24,7 +24,7 @@ surface meteorology). ``saastamoinen_zhd_m`` (Saastamoinen 1972, in the form of 
 
 import jax.numpy as jnp
 
-from oaraim.geometry.frames import C_M_S
+from oaraim.constants import C_M_S
 
 SEMICIRCLE_RAD = jnp.pi
 

@@ -20,7 +20,7 @@ All functions are pure JAX, float64, and broadcast over leading batch axes.
 import jax
 import jax.numpy as jnp
 
-from oaraim.geometry.frames import C_M_S
+from oaraim.constants import C_M_S
 
 #: OCXO of the NI USRP-2954R of seed 000 section IV-A: clock-bias process-noise PSD, seconds
 S_WDT_OCXO_S = 1.3e-22

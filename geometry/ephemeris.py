@@ -41,12 +41,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from oaraim.constants import MU_GAL_M3_S2, MU_GPS_M3_S2
 from oaraim.geometry import gpstime
 from oaraim.geometry.kepler import (
     F_GAL_S_SQRT_M,
     F_GPS_S_SQRT_M,
-    MU_GAL_M3_S2,
-    MU_GPS_M3_S2,
     OrbitElements,
     clock_polynomial_s,
     orbit_ecef,

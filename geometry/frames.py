@@ -1,7 +1,6 @@
 """Earth frames: WGS-84 ECEF <-> geodetic, the local ENU frame, azimuth and elevation.
 
-Constants of the WGS-84 ellipsoid from NIMA TR8350.2, "Department of Defense World Geodetic
-System 1984", 3rd edition (2000), Table 3.1 (defining parameters) and Table 3.3 (derived).
+The constants of the WGS-84 ellipsoid (NIMA TR8350.2) live in ``oaraim.constants``.
 
 Conventions: angles in radians unless the name says ``_deg``; heights above the ellipsoid in
 metres; ECEF in metres; azimuth clockwise from geodetic north in [0, 2 pi); elevation above the
@@ -10,27 +9,19 @@ leading axes broadcast, the last axis of a position is its 3 coordinates.
 """
 
 import jax.numpy as jnp
+import numpy as np
 
-#: WGS-84 semi-major axis a, metres (NIMA TR8350.2 Table 3.1)
-WGS84_A_M = 6378137.0
-#: WGS-84 flattening f = 1 / 298.257223563 (NIMA TR8350.2 Table 3.1)
-WGS84_F = 1.0 / 298.257223563
-#: WGS-84 angular velocity of the Earth, rad/s (NIMA TR8350.2 Table 3.1)
-WGS84_OMEGA_E_RAD_S = 7.292115e-5
-#: Earth rotation rate of the GPS and Galileo broadcast models, rad/s (IS-GPS-200 Table 20-IV;
-#: Galileo OS SIS ICD Issue 2.0 Table 59): the value the ephemeris user algorithm must use
-OMEGA_E_GNSS_RAD_S = 7.2921151467e-5
-#: WGS-84 GM including the atmosphere, m^3/s^2 (NIMA TR8350.2 Table 3.1). The GPS broadcast
-#: model uses IS-GPS-200's 3.986005e14 instead (geometry.ephemeris).
-WGS84_GM_M3_S2 = 3.986004418e14
-#: first eccentricity squared e^2 = f (2 - f) (NIMA TR8350.2 Table 3.3: 6.69437999014e-3)
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
-#: semi-minor axis b = a (1 - f) (NIMA TR8350.2 Table 3.3: 6356752.3142 m)
-WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
-#: second eccentricity squared e'^2 = e^2 / (1 - e^2)
-WGS84_EP2 = WGS84_E2 / (1.0 - WGS84_E2)
-#: speed of light in vacuum, m/s (IS-GPS-200 20.3.4.3; exact by definition)
-C_M_S = 299792458.0
+from oaraim.constants import (
+    FREE_AIR_GRADIENT_PER_S2,
+    OMEGA_E_GNSS_RAD_S,
+    WGS84_A_M,
+    WGS84_B_M,
+    WGS84_E2,
+    WGS84_EP2,
+    WGS84_F,
+    WGS84_GAMMA_E_MPS2,
+    WGS84_SOMIGLIANA_K,
+)
 
 #: fixed number of Bowring iterations in ``ecef_to_geodetic`` (jit-friendly). Bowring's
 #: parametric-latitude iteration converges cubically: one step is below 1 um of height error
@@ -133,11 +124,14 @@ def azimuth_elevation(receiver_ecef_m, transmitter_ecef_m):
     lat, lon, _ = ecef_to_geodetic(receiver_ecef_m)
     r = enu_rotation(lat, lon)
     d = jnp.asarray(transmitter_ecef_m, jnp.float64) - receiver_ecef_m
-    return _az_el_from_rotation(r, d)
+    return az_el_from_rotation(r, d)
 
 
-def _az_el_from_rotation(r, d):
-    """Az, el, range of line-of-sight vectors ``d`` (..., 3) in ECEF given ENU rotation ``r``."""
+def az_el_from_rotation(r, d):
+    """Azimuth (rad, clockwise from north, [0, 2 pi)), elevation (rad) and range (m) of
+    line-of-sight vectors ``d`` (..., 3, ECEF metres) given the ECEF -> ENU rotation ``r``
+    (..., 3, 3) of ``enu_rotation``: for callers that already hold the rotation of the receiver
+    (``azimuth_elevation`` computes it from the receiver position)."""
     e = jnp.sum(r[..., 0, :] * d, -1)
     n = jnp.sum(r[..., 1, :] * d, -1)
     u = jnp.sum(r[..., 2, :] * d, -1)
@@ -160,3 +154,18 @@ def earth_rotation_correction(sat_ecef_m, travel_time_s):
     c, s = jnp.cos(a), jnp.sin(a)
     x, y, z = sat_ecef_m[..., 0], sat_ecef_m[..., 1], sat_ecef_m[..., 2]
     return jnp.stack([c * x + s * y, -s * x + c * y, z], -1)
+
+
+def normal_gravity_mps2(lat_rad, h_m=0.0):
+    """Magnitude of WGS-84 normal gravity at geodetic latitude ``lat_rad`` and a small height
+    ``h_m`` above the ellipsoid, m/s^2: Somigliana's closed formula on the ellipsoid (NIMA
+    TR8350.2 eq. 4-1) minus the free-air gradient times the height (the first-order term of
+    eq. 4-3, ``oaraim.constants.FREE_AIR_GRADIENT_PER_S2``); within 0.3 % of the full
+    eq. (4-3) height correction below 1 km.
+
+    NumPy on the host (a float for scalar inputs, else an array broadcast over the inputs): the
+    simulated drives and the replays take one value at their origin."""
+    s2 = np.sin(lat_rad) ** 2
+    g0 = WGS84_GAMMA_E_MPS2 * (1.0 + WGS84_SOMIGLIANA_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
+    g = g0 - FREE_AIR_GRADIENT_PER_S2 * np.asarray(h_m, np.float64)
+    return float(g) if np.ndim(g) == 0 else g

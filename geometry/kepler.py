@@ -19,13 +19,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from oaraim.geometry.frames import OMEGA_E_GNSS_RAD_S
+from oaraim.constants import OMEGA_E_GNSS_RAD_S
 
-#: GPS value of the Earth's gravitational constant, m^3/s^2 (IS-GPS-200 Table 20-IV)
-MU_GPS_M3_S2 = 3.986005e14
-#: Galileo value of the Earth's gravitational constant, m^3/s^2 (Galileo OS SIS ICD Issue 2.0,
-#: Table 60)
-MU_GAL_M3_S2 = 3.986004418e14
 #: relativistic clock constant F = -2 sqrt(mu) / c^2, s/m^(1/2) (IS-GPS-200 20.3.3.3.3.1)
 F_GPS_S_SQRT_M = -4.442807633e-10
 #: the same with Galileo's mu (Galileo OS SIS ICD Issue 2.0, section 5.1.4)

@@ -25,10 +25,10 @@ import functools
 
 import numpy as np
 
+from oaraim.constants import OMEGA_E_GNSS_RAD_S
 from oaraim.geometry import gpstime
 from oaraim.geometry.almanac import Almanac, AlmanacRecords
 from oaraim.geometry.ephemeris import GALILEO, GPS
-from oaraim.geometry.frames import OMEGA_E_GNSS_RAD_S
 
 #: SPS PS Table 3.2-2 reference epoch: 0000Z (UTC) 1 July 1993. GPS - UTC was 9 s after the leap
 #: second of 30 June 1993 (IERS Bulletin C 5), hence + 9 s to express it in GPS time.

@@ -49,11 +49,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from oaraim.constants import C_M_S
 from oaraim.geometry import atmosphere, gpstime
 from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation
 from oaraim.geometry.frames import (
-    C_M_S,
-    _az_el_from_rotation,
+    az_el_from_rotation,
     earth_rotation_correction,
     ecef_to_geodetic,
     enu_rotation,
@@ -734,7 +734,7 @@ def _receiver_terms(x, sat_tx, t_rx, day_of_year, alpha, beta, use_iono):
     rot, tau = sagnac_rotate(x, sat_tx)
     lat, lon, h = ecef_to_geodetic(x)
     r = enu_rotation(lat, lon)
-    az, el, _ = _az_el_from_rotation(r[..., None, :, :], rot - x[..., None, :])
+    az, el, _ = az_el_from_rotation(r[..., None, :, :], rot - x[..., None, :])
     la, lo, hh = lat[..., None], lon[..., None], h[..., None]
     phi_m = atmosphere.klobuchar_geomagnetic_latitude_rad(la, lo, az, el)
     if use_iono:

@@ -44,8 +44,8 @@ from oaraim import araim, data, geometry
 from oaraim.araim import snapshot
 from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
 from oaraim.araim.mhss import required_order
+from oaraim.constants import C_M_S
 from oaraim.geometry import gpstime, rinex_obs
-from oaraim.geometry.frames import C_M_S
 from oaraim.studies.base import (
     Param,
     Study,

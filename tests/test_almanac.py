@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
-from oaraim.geometry.frames import OMEGA_E_GNSS_RAD_S
-from oaraim.geometry.kepler import GPS_PI, MU_GPS_M3_S2
+from oaraim.constants import MU_GPS_M3_S2, OMEGA_E_GNSS_RAD_S
+from oaraim.geometry.kepler import GPS_PI
 from oaraim.geometry.nominal import GPS_SPS_EPOCH_T_GPS_S
 
 DEG = np.pi / 180.0

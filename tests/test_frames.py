@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
+from oaraim.constants import WGS84_A_M, WGS84_B_M, WGS84_E2
 from oaraim.geometry import gpstime
-from oaraim.geometry.frames import WGS84_A_M, WGS84_B_M, WGS84_E2
 
 DEG = np.pi / 180.0
 

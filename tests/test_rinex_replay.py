@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from oaraim import araim, geometry
+from oaraim.constants import C_M_S
 from oaraim.geometry import rinex_obs
-from oaraim.geometry.frames import C_M_S
 from oaraim.studies import rinex_replay
 from oaraim.studies.registry import STUDIES
 

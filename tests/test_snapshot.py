@@ -8,8 +8,8 @@ import pytest
 
 from oaraim import araim, geometry
 from oaraim.araim import snapshot
+from oaraim.constants import C_M_S
 from oaraim.geometry import atmosphere
-from oaraim.geometry.frames import C_M_S
 
 # --------------------------------------------------------------------------- Klobuchar
 

@@ -1,0 +1,42 @@
+"""Physical and geodetic constants, each defined once, with its source.
+
+Every other module imports these; none writes a literal of its own.
+"""
+
+#: speed of light in vacuum, m/s (IS-GPS-200 20.3.4.3; exact by definition, SI)
+C_M_S = 299792458.0
+
+#: WGS-84 semi-major axis a, m (NIMA TR8350.2, 3rd ed. 2000, Table 3.1)
+WGS84_A_M = 6378137.0
+#: WGS-84 flattening f = 1 / 298.257223563 (NIMA TR8350.2 Table 3.1)
+WGS84_F = 1.0 / 298.257223563
+#: WGS-84 first eccentricity squared e^2 = f (2 - f) (NIMA TR8350.2 Table 3.3: 6.69437999014e-3)
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+#: WGS-84 semi-minor axis b = a (1 - f), m (NIMA TR8350.2 Table 3.3: 6356752.3142 m)
+WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
+#: WGS-84 second eccentricity squared e'^2 = e^2 / (1 - e^2) (NIMA TR8350.2 Table 3.3)
+WGS84_EP2 = WGS84_E2 / (1.0 - WGS84_E2)
+#: WGS-84 GM including the atmosphere, m^3/s^2 (NIMA TR8350.2 Table 3.1; Galileo OS SIS ICD
+#: Issue 2.0 Table 59 uses the same value for the Galileo broadcast model)
+WGS84_GM_M3_S2 = 3.986004418e14
+#: WGS-84 angular velocity of the Earth, rad/s (NIMA TR8350.2 Table 3.1)
+WGS84_OMEGA_E_RAD_S = 7.292115e-5
+
+#: Earth rotation rate of the GPS and Galileo broadcast models, rad/s (IS-GPS-200 Table 20-IV;
+#: Galileo OS SIS ICD Issue 2.0 Table 59): the value the ephemeris user algorithm must use
+OMEGA_E_GNSS_RAD_S = 7.2921151467e-5
+#: GM of the GPS broadcast model, m^3/s^2 (IS-GPS-200 Table 20-IV)
+MU_GPS_M3_S2 = 3.986005e14
+#: GM of the Galileo broadcast model, m^3/s^2 (Galileo OS SIS ICD Issue 2.0 Table 59)
+MU_GAL_M3_S2 = WGS84_GM_M3_S2
+
+#: WGS-84 normal gravity at the equator, m/s^2 (NIMA TR8350.2 Table 3.4)
+WGS84_GAMMA_E_MPS2 = 9.7803253359
+#: WGS-84 normal gravity at the poles, m/s^2 (NIMA TR8350.2 Table 3.4)
+WGS84_GAMMA_P_MPS2 = 9.8321849378
+#: Somigliana constant k = (b gamma_p - a gamma_e) / (a gamma_e) (NIMA TR8350.2 eq. 4-1)
+WGS84_SOMIGLIANA_K = 0.00193185265241
+#: free-air gradient of WGS-84 normal gravity near the surface, 1/s^2: the first-order height
+#: term of NIMA TR8350.2 eq. (4-3), 2 gamma_e (1 + f + m) / a, at the equator (the
+#: latitude-dependent and second-order terms change it by < 0.3 % below 1 km)
+FREE_AIR_GRADIENT_PER_S2 = 3.0877e-6
