@@ -64,19 +64,11 @@ from oaraim.araim.ekf import (
     ekf_update,
     run_ekf,
 )
-from oaraim.araim.ekf_raim import (
-    DriveSummary,
-    RaimConfig,
-    drive_setup,
-    monte_carlo_drive,
-    run_ekf_raim,
-    simulate_drive,
-)
+from oaraim.araim.ekf_raim import RaimConfig, run_ekf_raim
 
 __all__ += [
-    "DriveSummary", "EkfParams", "EkfState", "RaimConfig", "drive_setup", "ekf", "ekf_init",
-    "ekf_predict", "ekf_raim", "ekf_step", "ekf_update", "monte_carlo_drive", "run_ekf",
-    "run_ekf_raim", "simulate_drive",
+    "EkfParams", "EkfState", "RaimConfig", "ekf", "ekf_init", "ekf_predict", "ekf_raim",
+    "ekf_step", "ekf_update", "run_ekf", "run_ekf_raim",
 ]
 
 from oaraim.araim import snapshot  # noqa: E402

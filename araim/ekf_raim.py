@@ -24,14 +24,10 @@ Per pseudorange epoch k+1, after the EKF time update (``araim.ekf``):
 Failures are data: with d < 1 the threshold and lambda_min are inf, nothing is detected, HPL is
 inf and the status is ``TOO_FEW_SOURCES``; never a NaN.
 
-The drive runner ``simulate_drive`` synthesizes one Monte Carlo run of a ``geometry.trajectory``
-scenario inside a ``lax.scan`` over pseudorange epochs (IMU noise, GM biases, receiver clock,
-multipath, pseudoranges and the injected fault drawn from ``fold_in(key, epoch)``, so nothing of
-size runs x epochs is stored), runs the EKF without and with exclusion side by side, and returns
-per-run summaries; ``monte_carlo_drive`` vmaps it over runs.
+The simulated drives that run this monitor (``simulate_drive``, ``monte_carlo_drive``) live in
+``oaraim.sim.drive``; here is only what the receiver computes.
 """
 
-from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -41,7 +37,7 @@ import numpy as np
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
-from oaraim.geometry import clocks, imu, trajectory
+from oaraim.geometry import imu
 
 
 class RaimConfig(NamedTuple):
@@ -151,6 +147,7 @@ class RaimEpoch(NamedTuple):
 
 
 def raim_init(state: _ekf.EkfState, n_towers: int) -> RaimCarry:
+    """The carry of the first epoch: ``state``, Xi = 0, no previous used set, first = True."""
     return RaimCarry(state, jnp.zeros((_ekf.N_ERR, n_towers)), jnp.zeros(n_towers, bool),
                      jnp.asarray(True))
 
@@ -205,7 +202,7 @@ def run_ekf_raim(state0, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m, param
 
 
 # ------------------------------------------------------------------------------------------
-# Monte Carlo drive
+# The receiver's initial uncertainty
 
 
 class InitialUncertainty(NamedTuple):
@@ -221,205 +218,10 @@ class InitialUncertainty(NamedTuple):
 
 
 def initial_covariance(spec: imu.ImuSpec, init: InitialUncertainty):
+    """The EKF's initial covariance P0 (17 x 17, diagonal): ``init``'s sigmas and the IMU
+    biases at their stationary GM sigma of ``spec``."""
     sd = np.concatenate([np.asarray(init.att_rad, float), np.full(3, init.pos_m),
                          np.full(3, init.vel_m_s), np.full(3, spec.gyro_bias_sigma_rad_s),
                          np.full(3, spec.accel_bias_sigma_m_s2),
                          [init.clk_m, init.clk_drift_m_s]])
     return jnp.diag(jnp.asarray(sd**2))
-
-
-class DriveSummary(NamedTuple):
-    """Per-run summaries; arrays of shape (2,) are [without exclusion, with exclusion].
-
-    Times in s (inf: never); counts are integers; NEES/NIS are means over the epochs of the run
-    (NIS over the valid towers before exclusion; ``nis_dof_mean`` its mean d = N_s)."""
-
-    rmse_2d_m: jnp.ndarray
-    max_2d_m: jnp.ndarray
-    detection_time_s: jnp.ndarray
-    n_false_alarms: jnp.ndarray
-    n_detections_after_onset: jnp.ndarray
-    n_correct_exclusions: jnp.ndarray
-    n_wrong_exclusions: jnp.ndarray
-    nees_mean: jnp.ndarray
-    nis_mean: jnp.ndarray
-    nis_dof_mean: jnp.ndarray
-    hpl_max_m: jnp.ndarray
-    n_alarms: jnp.ndarray
-    n_misleading: jnp.ndarray
-
-
-class DriveTrace(NamedTuple):
-    """Per-epoch traces of one run (for tests and plots), each (E, 2, ...); ``nees`` is
-    (E / nees_every, 2), at the last epoch of each block."""
-
-    t_s: jnp.ndarray
-    err_2d_m: jnp.ndarray
-    nees: jnp.ndarray
-    raim: RaimEpoch
-
-
-class DriveSetup(NamedTuple):
-    """Everything static for a drive: truth arrays reshaped per epoch, model, tables."""
-
-    gyro: jnp.ndarray       # (E, n, 3) ideal interval-mean body rates
-    accel: jnp.ndarray      # (E, n, 3)
-    pos: jnp.ndarray        # (E + 1, 3) truth at epoch boundaries (index 0 = start)
-    vel: jnp.ndarray
-    quat: jnp.ndarray
-    t_s: jnp.ndarray        # (E,) epoch times
-    tower_clk_m: jnp.ndarray  # (E, L)
-    towers: jnp.ndarray
-    params: _ekf.EkfParams
-    spec: imu.ImuSpec
-    P0: jnp.ndarray
-    tables: RaimTables
-
-
-def drive_setup(scenario: trajectory.Scenario, spec: imu.ImuSpec | None = None,
-                init: InitialUncertainty | None = None, cfg: RaimConfig | None = None,
-                duration_s: float | None = None) -> DriveSetup:
-    """Host-side preparation of ``simulate_drive`` (optionally truncated to ``duration_s``)."""
-    spec = imu.vn100() if spec is None else spec
-    init = InitialUncertainty() if init is None else init
-    cfg = RaimConfig() if cfg is None else cfg
-    tr = scenario.traj
-    dt = float(tr.t_s[1] - tr.t_s[0])
-    n = int(round(1.0 / (scenario.meas_rate_hz * dt)))
-    e = tr.gyro_rad_s.shape[0] // n
-    if duration_s is not None:
-        e = min(e, int(round(duration_s * scenario.meas_rate_hz)))
-    k = e * n
-    t_ep = tr.t_s[n:k + 1:n]
-    l = scenario.towers_enu_m.shape[0]
-    return DriveSetup(
-        gyro=tr.gyro_rad_s[:k].reshape(e, n, 3), accel=tr.accel_m_s2[:k].reshape(e, n, 3),
-        pos=tr.pos_m[:k + 1:n], vel=tr.vel_m_s[:k + 1:n], quat=tr.quat[:k + 1:n], t_s=t_ep,
-        tower_clk_m=clocks.tower_clock_m(t_ep[:, None], scenario.tower_clk_bias0_s,
-                                         scenario.tower_clk_drift),
-        towers=scenario.towers_enu_m,
-        params=_ekf.params_from_imu(spec, dt, tr.gravity_m_s2),
-        spec=spec, P0=initial_covariance(spec, init),
-        tables=raim_tables(cfg.p_fa, cfg.p_md, l))
-
-
-def _nees(state: _ekf.EkfState, q, r, v, bg, ba, clk):
-    e = jnp.concatenate([_ekf.attitude_error(q, state.q), r - state.r, v - state.v,
-                         bg - state.bg, ba - state.ba, clk - state.clk])
-    chol = jnp.linalg.cholesky(state.P)
-    y = jax.scipy.linalg.solve_triangular(chol, e, lower=True)
-    return y @ y
-
-
-@partial(jax.jit, static_argnames=("traces", "nees_every"))
-def simulate_drive(key, setup: DriveSetup, sigma_pr_m=2.0, mp_sigma_m=0.0, mp_tau_s=5.0,
-                   fault_tower=0, fault_onset_s=25.0, fault_bias_m=30.0, hal_m=30.0,
-                   dof_offset=0, traces=False, nees_every=10):
-    """One Monte Carlo run of a drive; returns ``DriveSummary`` (and ``DriveTrace`` if
-    ``traces``). vmap over ``key`` for many runs (``monte_carlo_drive``). Every numeric argument
-    is traced (one compilation serves fault-free and faulty runs, both d options).
-
-    The run covers the whole epochs of the setup rounded down to a multiple of ``nees_every``;
-    NEES (a 17 x 17 Cholesky solve, the costliest single step) is evaluated at the last epoch of
-    each block of ``nees_every`` epochs (1 Hz at the default 10 Hz pseudorange rate); every other
-    quantity at every epoch."""
-    sp, p = setup.spec, setup.params
-    n_t = setup.towers.shape[0]
-    dt_meas = setup.gyro.shape[1] * p.dt_s
-    k_init, k_bias, k_scan = jax.random.split(key, 3)
-    # initial truth and estimate: error ~ N(0, P0); biases start at their stationary draw
-    d0 = jnp.sqrt(jnp.diagonal(setup.P0)) * jax.random.normal(k_init, (_ekf.N_ERR,))
-    bg0, ba0 = imu.initial_biases(k_bias, sp)
-    clk0 = d0[_ekf.CLK]
-    q_true0 = setup.quat[0]
-    q_est0 = _ekf.quat_multiply(_ekf.error_quat(-d0[_ekf.TH]), q_true0)
-    est0 = _ekf.ekf_init(q_est0, setup.pos[0] - d0[_ekf.POS], setup.vel[0] - d0[_ekf.VEL],
-                         jnp.zeros(3), jnp.zeros(3), jnp.zeros(2), setup.P0)
-    carry_f = raim_init(est0, n_t)
-    carry_f = jax.tree.map(lambda x: jnp.stack([x, x]), carry_f)
-    exclude = jnp.array([False, True])
-    mp0 = jnp.zeros(n_t)
-
-    def body(c, inp):
-        truth, filt = c
-        bg, ba, clk, mp = truth
-        e, g_true, a_true, t_e, pos_e, vel_e, q_e, tclk = inp
-        ke = jax.random.fold_in(k_scan, e)
-        n_sub = g_true.shape[0]
-        w = jax.random.normal(ke, (n_sub * 12 + 2 + 2 * n_t,))
-        w_imu = w[:n_sub * 12].reshape(n_sub, 12)
-        w_clk = w[n_sub * 12:n_sub * 12 + 2]
-        w_mp = w[n_sub * 12 + 2:n_sub * 12 + 2 + n_t]
-        w_pr = w[n_sub * 12 + 2 + n_t:]
-
-        def imu_step(b, x):
-            # a scan, not an unrolled loop: unrolled, XLA fused the whole bias chain into every
-            # sample's fusion (quadratic recomputation, ~15 % of the run time)
-            wj, gt, at = x
-            gj, aj, bgj, baj = imu.imu_sample_normals(wj, gt, at, b[0], b[1], sp, p.dt_s)
-            return (bgj, baj), (gj, aj)
-
-        (bg, ba), (gm, am) = jax.lax.scan(imu_step, (bg, ba), (w_imu, g_true, a_true))
-        clk = clocks.clock_step_normals(w_clk, clk, dt_meas, p.s_wdt_s, p.s_wdtdot_per_s)
-        phi_mp = jnp.exp(-dt_meas / mp_tau_s)
-        mp = phi_mp * mp + mp_sigma_m * jnp.sqrt(1.0 - phi_mp**2) * w_mp
-        bias = mp + trajectory.fault_bias_m(t_e, fault_onset_s, fault_bias_m, fault_tower, n_t)
-        z = (trajectory.pseudorange_true(pos_e, setup.towers, clk[0], tclk) + bias
-             + sigma_pr_m * w_pr)
-        valid = jnp.ones(n_t, bool)
-
-        def one_filter(cf, excl):
-            prior, phi = _ekf.ekf_predict(cf.state, gm, am, p)
-            cf, out = raim_update(cf, prior, phi, z, valid, setup.towers, tclk, sigma_pr_m,
-                                  setup.tables, dof_offset, excl, hal_m)
-            err2d = jnp.linalg.norm(cf.state.r[:2] - pos_e[:2])
-            return cf, (err2d, out)
-
-        filt, (err2d, out) = jax.vmap(one_filter)(filt, exclude)
-        return ((bg, ba, clk, mp), filt), (err2d, out)
-
-    def block(c, xs_blk):
-        # nees_every epochs, then the NEES of both filters at the block's last epoch
-        c, (err2d, out) = jax.lax.scan(body, c, xs_blk)
-        (bg, ba, clk, _), filt = c
-        _, _, t_e, pos_e, vel_e, q_e, _ = xs_blk[1:]
-        nees = jax.vmap(lambda st: _nees(st, q_e[-1], pos_e[-1], vel_e[-1], bg, ba, clk))(
-            filt.state)
-        return c, (err2d, out, nees)
-
-    n_ep = setup.t_s.shape[0] // nees_every * nees_every
-    e_idx = jnp.arange(n_ep)
-    xs = (e_idx, setup.gyro[:n_ep], setup.accel[:n_ep], setup.t_s[:n_ep], setup.pos[1:n_ep + 1],
-          setup.vel[1:n_ep + 1], setup.quat[1:n_ep + 1], setup.tower_clk_m[:n_ep])
-    xs = jax.tree.map(lambda x: x.reshape((n_ep // nees_every, nees_every) + x.shape[1:]), xs)
-    _, (err2d, out, nees) = jax.lax.scan(block, ((bg0, ba0, clk0, mp0), carry_f), xs)
-    flat = lambda x: x.reshape((n_ep,) + x.shape[2:])  # noqa: E731
-    err2d, out = flat(err2d), jax.tree.map(flat, out)
-    t = setup.t_s[:n_ep, None]
-    after = t >= fault_onset_s
-    det = out.detected
-    big = jnp.inf
-    summary = DriveSummary(
-        rmse_2d_m=jnp.sqrt(jnp.mean(err2d**2, 0)),
-        max_2d_m=jnp.max(err2d, 0),
-        detection_time_s=jnp.min(jnp.where(det & after, t, big), 0),
-        n_false_alarms=jnp.sum(det & ~after, 0),
-        n_detections_after_onset=jnp.sum(det & after, 0),
-        n_correct_exclusions=jnp.sum(after & (out.excluded == fault_tower), 0),
-        n_wrong_exclusions=jnp.sum((out.excluded >= 0) & ~(after & (out.excluded == fault_tower)),
-                                   0),
-        nees_mean=jnp.mean(nees, 0),
-        nis_mean=jnp.mean(out.nis, 0),
-        nis_dof_mean=jnp.mean(out.dof.astype(jnp.float64), 0),
-        hpl_max_m=jnp.max(out.hpl_m, 0),
-        n_alarms=jnp.sum(out.alarm, 0),
-        n_misleading=jnp.sum(err2d > out.hpl_m, 0),
-    )
-    if traces:
-        return summary, DriveTrace(setup.t_s[:n_ep], err2d, nees, out)
-    return summary
-
-
-def monte_carlo_drive(keys, setup: DriveSetup, **kw):
-    """``simulate_drive`` vmapped over run keys; summaries with a leading runs axis."""
-    return jax.vmap(lambda k: simulate_drive(k, setup, **kw))(keys)

@@ -8,10 +8,10 @@ and subset exclusion (``araim.ekf_raim.raim_update``: detection, exclusion, Jose
 recursion, slope HPL, HAL alarm). It returns per-epoch traces of both (``ReplayTrace``) and, when
 the recording has truth, the position errors.
 
-``synthesize_recording(scenario, key, ...)`` is the other direction: one Monte Carlo run of a
-``geometry.trajectory`` scenario (the same noise draws as ``araim.ekf_raim.simulate_drive`` with
-that key) written as a ``Recording``. Studies write it to disk, load it back and replay it, so the
-synthetic drives go through exactly the loader and replay path a user's real drive goes through.
+The other direction, one simulated run written as a ``Recording``, is
+``oaraim.sim.synthesize_recording``; studies write it to disk, load it back and replay it here,
+so the synthetic drives go through exactly the loader and replay path a user's real drive goes
+through.
 
 Replay rules (what a recording must satisfy beyond the loader's checks):
 
@@ -49,12 +49,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pandas as pd
 
 from oaraim.araim import ekf as _ekf
 from oaraim.araim import ekf_raim as _er
-from oaraim.geometry import clocks, imu, recording, trajectory
-from oaraim.geometry import frames as _frames
+from oaraim.geometry import frames, imu, recording
 
 #: tolerance, in IMU steps, for uniform IMU stamps and for epochs lying on IMU stamps
 _STEP_TOL = 0.01
@@ -303,7 +301,7 @@ def replay_ekf_raim(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
     p0 = _er.initial_covariance(spec, init_uncertainty)
     est0, src = _initial_state(rec, prep, initial, p0)
     o = rec.meta["origin"]
-    grav = np.array([0.0, 0.0, -trajectory.normal_gravity(np.deg2rad(o["lat_deg"]), o["h_m"])])
+    grav = np.array([0.0, 0.0, -frames.normal_gravity_mps2(np.deg2rad(o["lat_deg"]), o["h_m"])])
     params = _ekf.params_from_imu(spec, prep.dt_s, grav)
     tables = _er.raim_tables(cfg.p_fa, cfg.p_md, prep.towers.shape[0])
     r, sd, out = _replay_scan(est0, jnp.asarray(prep.gyro), jnp.asarray(prep.accel),
@@ -361,142 +359,3 @@ def trace_summary(tr: ReplayTrace, fault_onset_s: float | None = None,
         d["alarms"] = int(np.sum(tr.alarm[i]))
         out[name] = d
     return out
-
-
-# ----------------------------------------------------------------------------- synthesis
-
-@jax.jit
-def _synth(key, setup: _er.DriveSetup, sigma_pr_m, mp_sigma_m, mp_tau_s, fault_tower,
-           fault_onset_s, fault_bias_m):
-    """The measurement draws of ``simulate_drive`` (same key use): IMU samples, receiver clock,
-    multipath, pseudoranges, and the initial estimate."""
-    sp, p = setup.spec, setup.params
-    n_t = setup.towers.shape[0]
-    n_sub = setup.gyro.shape[1]
-    dt_meas = n_sub * p.dt_s
-    k_init, k_bias, k_scan = jax.random.split(key, 3)
-    d0 = jnp.sqrt(jnp.diagonal(setup.P0)) * jax.random.normal(k_init, (_ekf.N_ERR,))
-    bg0, ba0 = imu.initial_biases(k_bias, sp)
-    clk0 = d0[_ekf.CLK]
-    q_est0 = _ekf.quat_multiply(_ekf.error_quat(-d0[_ekf.TH]), setup.quat[0])
-    est = (q_est0, setup.pos[0] - d0[_ekf.POS], setup.vel[0] - d0[_ekf.VEL])
-
-    def body(c, inp):
-        bg, ba, clk, mp = c
-        e, g_true, a_true, t_e, pos_e, tclk = inp
-        ke = jax.random.fold_in(k_scan, e)
-        w = jax.random.normal(ke, (n_sub * 12 + 2 + 2 * n_t,))
-        w_imu = w[:n_sub * 12].reshape(n_sub, 12)
-        w_clk = w[n_sub * 12:n_sub * 12 + 2]
-        w_mp = w[n_sub * 12 + 2:n_sub * 12 + 2 + n_t]
-        w_pr = w[n_sub * 12 + 2 + n_t:]
-        gm, am = [], []
-        for j in range(n_sub):
-            gj, aj, bg, ba = imu.imu_sample_normals(w_imu[j], g_true[j], a_true[j], bg, ba, sp,
-                                                    p.dt_s)
-            gm.append(gj)
-            am.append(aj)
-        clk = clocks.clock_step_normals(w_clk, clk, dt_meas, p.s_wdt_s, p.s_wdtdot_per_s)
-        phi_mp = jnp.exp(-dt_meas / mp_tau_s)
-        mp = phi_mp * mp + mp_sigma_m * jnp.sqrt(1.0 - phi_mp**2) * w_mp
-        bias = mp + trajectory.fault_bias_m(t_e, fault_onset_s, fault_bias_m, fault_tower, n_t)
-        z = (trajectory.pseudorange_true(pos_e, setup.towers, clk[0], tclk) + bias
-             + sigma_pr_m * w_pr)
-        return (bg, ba, clk, mp), (jnp.stack(gm), jnp.stack(am), z, clk, bias)
-
-    n_ep = setup.t_s.shape[0]
-    xs = (jnp.arange(n_ep), setup.gyro, setup.accel, setup.t_s, setup.pos[1:], setup.tower_clk_m)
-    _, (gm, am, z, clk, bias) = jax.lax.scan(body, (bg0, ba0, clk0, jnp.zeros(n_t)), xs)
-    return gm, am, z, clk, bias, est, clk0, (bg0, ba0)
-
-
-def synthesize_recording(scenario: trajectory.Scenario, key, *, sigma_pr_m: float | None = None,
-                         mp_sigma_m: float | None = None, mp_tau_s: float | None = None,
-                         fault_tower: int | None = None, fault_onset_s: float | None = None,
-                         fault_bias_m: float | None = None, spec: imu.ImuSpec | None = None,
-                         init_uncertainty: _er.InitialUncertainty | None = None,
-                         duration_s: float | None = None) -> recording.Recording:
-    """One run of ``scenario`` as a validated ``Recording`` (scenario values where an argument
-    is None). The draws are those of ``araim.ekf_raim.simulate_drive(key, ...)``: the same IMU
-    samples, clock, multipath, pseudoranges and initial estimate error, so replaying the
-    recording reproduces that run (up to the ENU -> ECEF -> ENU round trip, ~1e-9 m).
-
-    Tables: imu (100 Hz, stamps at the end of each interval-mean sample), transmitters (ECEF,
-    clock polynomials c dt = bias + drift t), pseudoranges (10 Hz, ``sigma_m``), truth at t = 0
-    and every epoch (ECEF position and velocity, JPL quaternion, receiver clock). meta.json
-    carries ``initial_state`` (truth at t = 0 minus the drawn initial error: what the GNSS
-    period leaves), ``imu_spec`` and every scenario and draw parameter under ``source``."""
-    sc = scenario
-    spec = imu.vn100() if spec is None else spec
-    arg = lambda v, d: d if v is None else v  # noqa: E731
-    kw = dict(sigma_pr_m=float(arg(sigma_pr_m, sc.sigma_pr_m)),
-              mp_sigma_m=float(arg(mp_sigma_m, sc.mp_sigma_m)),
-              mp_tau_s=float(arg(mp_tau_s, sc.mp_tau_s)),
-              fault_tower=int(arg(fault_tower, sc.fault_tower)),
-              fault_onset_s=float(arg(fault_onset_s, sc.fault_onset_s)),
-              fault_bias_m=float(arg(fault_bias_m, sc.fault_bias_m)))
-    setup = _er.drive_setup(sc, spec, init_uncertainty, duration_s=duration_s)
-    gm, am, z, clk, bias, est, clk0, _ = jax.device_get(_synth(
-        key, setup, kw["sigma_pr_m"], kw["mp_sigma_m"], kw["mp_tau_s"], kw["fault_tower"],
-        kw["fault_onset_s"], kw["fault_bias_m"]))
-    e, n = gm.shape[:2]
-    dt = float(setup.params.dt_s)
-    lat, lon, h = sc.origin_lat_deg, sc.origin_lon_deg, sc.origin_h_m
-    origin = np.asarray(_frames.geodetic_to_ecef(np.deg2rad(lat), np.deg2rad(lon), h))
-    rot = np.asarray(_frames.enu_rotation(np.deg2rad(lat), np.deg2rad(lon)))  # ECEF -> ENU rows
-
-    def ecef(p_enu):
-        return origin + np.asarray(p_enu) @ rot
-
-    # stamps: multiples of dt via integer counts (bit-identical epoch / IMU stamps)
-    t_imu = np.arange(1, e * n + 1) * dt
-    t_ep = np.asarray(setup.t_s)
-    ids = [f"T{i + 1}" for i in range(sc.towers_enu_m.shape[0])]
-    l = len(ids)
-    tw = ecef(np.asarray(sc.towers_enu_m))
-    c = _frames.C_M_S
-    transmitters = pd.DataFrame({
-        "tx_id": ids, "kind": "lte", "group": "carrier_a",
-        "x_m": tw[:, 0], "y_m": tw[:, 1], "z_m": tw[:, 2],
-        "clock_bias_m": c * np.asarray(sc.tower_clk_bias0_s),
-        "clock_drift_mps": c * np.asarray(sc.tower_clk_drift), "clock_t0_s": 0.0})
-    pseudoranges = pd.DataFrame({
-        "t_s": np.repeat(t_imu[n - 1::n], l), "tx_id": np.tile(ids, e),
-        "pseudorange_m": np.asarray(z).reshape(-1), "sigma_m": kw["sigma_pr_m"],
-        "injected_bias_m": np.asarray(bias).reshape(-1)})
-    g, a = np.asarray(gm).reshape(-1, 3), np.asarray(am).reshape(-1, 3)
-    imu_df = pd.DataFrame({"t_s": t_imu, "gyro_x_radps": g[:, 0], "gyro_y_radps": g[:, 1],
-                           "gyro_z_radps": g[:, 2], "accel_x_mps2": a[:, 0],
-                           "accel_y_mps2": a[:, 1], "accel_z_mps2": a[:, 2]})
-    pos = ecef(np.asarray(setup.pos))
-    vel = np.asarray(setup.vel) @ rot
-    q = np.asarray(setup.quat)
-    clk_all = np.concatenate([np.asarray(clk0)[None], np.asarray(clk)])
-    truth = pd.DataFrame({
-        "t_s": np.concatenate([[0.0], t_imu[n - 1::n]]), "x_m": pos[:, 0], "y_m": pos[:, 1],
-        "z_m": pos[:, 2], "vx_mps": vel[:, 0], "vy_mps": vel[:, 1], "vz_mps": vel[:, 2],
-        "qx": q[:, 0], "qy": q[:, 1], "qz": q[:, 2], "qw": q[:, 3],
-        "rx_clock_m": clk_all[:, 0], "rx_clock_drift_mps": clk_all[:, 1]})
-    q0, r0, v0 = (np.asarray(x, float) for x in est)
-    meta = {
-        "format": recording.FORMAT_NAME, "format_version": recording.FORMAT_VERSION,
-        "name": sc.name, "description": f"synthesized run of {sc.name} (araim.ekf_replay)",
-        "origin": {"lat_deg": lat, "lon_deg": lon, "h_m": h},
-        "imu_rate_hz": 1.0 / dt, "body_frame": "FLU", "quaternion": "JPL",
-        "initial_state": {"t_s": 0.0, "position_enu_m": r0.tolist(),
-                          "velocity_enu_mps": v0.tolist(), "quaternion_jpl": q0.tolist(),
-                          "gyro_bias_radps": [0.0] * 3, "accel_bias_mps2": [0.0] * 3,
-                          "rx_clock_m": 0.0, "rx_clock_drift_mps": 0.0},
-        "imu_spec": {k: float(v) for k, v in spec._asdict().items()},
-        "source": {"kind": "synthesized", "generator": "araim.ekf_replay.synthesize_recording",
-                   "scenario": sc.name, "key_data": np.asarray(
-                       jax.random.key_data(key)).astype(int).tolist(),
-                   "parameters": {**kw, "fault_tower_id": ids[kw["fault_tower"]],
-                                  "duration_s": float(t_ep[-1]),
-                                  "meas_rate_hz": float(sc.meas_rate_hz)},
-                   "notes": {k: str(v) for k, v in sc.notes.items()}},
-    }
-    return recording.validate_recording(recording.Recording(
-        meta=meta, transmitters=transmitters, pseudoranges=pseudoranges, imu=imu_df,
-        truth=truth))
-

@@ -1,5 +1,7 @@
 """Where the transmitters are: line-of-sight geometry, random skies, BPP towers, Earth frames,
-GPS time, broadcast ephemerides, almanacs, nominal constellations and the sky of a receiver.
+GPS time, broadcast ephemerides, almanacs, nominal constellations and the sky of a receiver;
+the recorded-data format and the sensor models (IMU, clocks) a receiver and the simulated world
+(``oaraim.sim``) share.
 
 Everything here is a pure JAX function on arrays, batch first, float64.
 """
@@ -18,6 +20,7 @@ from oaraim.geometry.ephemeris import (
     load_navigation,
 )
 from oaraim.geometry.frames import (
+    az_el_from_rotation,
     azimuth_elevation,
     earth_rotation_correction,
     ecef_to_enu,
@@ -25,6 +28,7 @@ from oaraim.geometry.frames import (
     enu_rotation,
     enu_to_ecef,
     geodetic_to_ecef,
+    normal_gravity_mps2,
 )
 from oaraim.geometry.nominal import galileo_walker, gps_24_slot
 from oaraim.geometry.random_sky import Towers, bpp_towers, random_sky
@@ -34,16 +38,18 @@ from oaraim.geometry.sp3 import PreciseOrbits, SP3Error, read_sp3
 
 __all__ = [
     "GALILEO", "GPS", "Almanac", "AlmanacFileError", "Ephemeris", "NavigationFileError",
-    "PreciseOrbits", "SP3Error", "Sky", "Towers", "azimuth_elevation", "bpp_towers",
+    "PreciseOrbits", "SP3Error", "Sky", "Towers", "az_el_from_rotation", "azimuth_elevation",
+    "bpp_towers",
     "earth_rotation_correction", "ecef_to_enu", "ecef_to_geodetic", "enu_rotation",
     "enu_to_ecef", "galileo_walker", "geodetic_to_ecef", "geometry_rows", "geometry_rows_enu",
-    "gps_24_slot", "gpstime", "load_navigation", "random_sky", "read_sem", "read_sp3",
+    "gps_24_slot", "gpstime", "load_navigation", "normal_gravity_mps2", "random_sky", "read_sem",
+    "read_sp3",
     "read_yuma", "sky",
 ]
 
 # The recordings' readers and writers need pandas (~0.5 s to import): ``recording`` and its
 # names load on first use (PEP 562), so `import oaraim.geometry` does not pay for them.
-_RECORDING_NAMES = ("Recording", "RecordingError", "example_recording", "gnss_matrix",
+_RECORDING_NAMES = ("Recording", "RecordingError", "gnss_matrix",
                     "load_recording", "pseudorange_matrix", "tower_clock_m", "write_recording")
 __all__ += ["recording", *_RECORDING_NAMES]
 
@@ -57,22 +63,10 @@ def __getattr__(name):
     raise AttributeError(f"module 'oaraim.geometry' has no attribute {name!r}")
 
 
-from oaraim.geometry import clocks, imu, trajectory  # noqa: E402
+from oaraim.geometry import clocks, imu  # noqa: E402
 from oaraim.geometry.imu import ImuSpec, vn100  # noqa: E402
-from oaraim.geometry.trajectory import (  # noqa: E402
-    SCENARIOS,
-    Scenario,
-    Segment,
-    Trajectory,
-    drive_seed000,
-    drive_seed002,
-    uav_seed004,
-)
 
-__all__ += [
-    "ImuSpec", "SCENARIOS", "Scenario", "Segment", "Trajectory", "clocks", "drive_seed000",
-    "drive_seed002", "imu", "trajectory", "uav_seed004", "vn100",
-]
+__all__ += ["ImuSpec", "clocks", "imu", "vn100"]
 
 from oaraim.geometry import atmosphere, rinex_obs  # noqa: E402
 from oaraim.geometry.rinex_obs import ObservationFileError, Observations, read_observations  # noqa: E402

@@ -13,16 +13,15 @@ import time
 import jax
 import numpy as np
 
-from oaraim.araim import ekf_raim
-from oaraim.geometry import trajectory
+from oaraim import sim
 
 
 def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:
     """Time ``runs`` Monte Carlo runs of the whole seed 000 drive; returns a JSON-able dict."""
-    scenario = trajectory.drive_seed000()
-    setup = ekf_raim.drive_setup(scenario)
+    scenario = sim.drive_seed000()
+    setup = sim.drive_setup(scenario)
     keys = jax.random.split(jax.random.key(seed), runs)
-    fn = jax.jit(lambda k: ekf_raim.monte_carlo_drive(
+    fn = jax.jit(lambda k: sim.monte_carlo_drive(
         k, setup, sigma_pr_m=scenario.sigma_pr_m, fault_tower=scenario.fault_tower,
         fault_onset_s=scenario.fault_onset_s, fault_bias_m=scenario.fault_bias_m))
     t0, c0 = time.perf_counter(), time.process_time()

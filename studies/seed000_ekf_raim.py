@@ -2,7 +2,7 @@
 
 Two parts, both through ``araim``'s EKF-RAIM (NIS detection, subset exclusion, Xi-slope HPL):
 
-1. One drive, for the figures: a synthesized run of ``geometry.drive_seed000()`` (fault on
+1. One drive, for the figures: a synthesized run of ``sim.drive_seed000()`` (fault on
    tower 1 from t = 25 s) is written in the recorded-drive format (``geometry.write_recording``:
    Parquet tables + meta.json), loaded back with ``geometry.load_recording`` and replayed by
    ``araim.ekf_replay.replay_ekf_raim``: exactly the path a user's real drive takes. Fig. 3a
@@ -12,7 +12,7 @@ Two parts, both through ``araim``'s EKF-RAIM (NIS detection, subset exclusion, X
    summary). ``--set drive_dir=PATH`` keeps the synthesized recording there (default: a
    temporary folder, removed after the replay).
 2. Monte Carlo (``--realizations`` runs, default 200, quick 20): one realization = one run of the
-   whole drive (``araim.ekf_raim.monte_carlo_drive``: IMU noise and GM biases, receiver clock,
+   whole drive (``sim.monte_carlo_drive``: IMU noise and GM biases, receiver clock,
    pseudorange noise, initial error, both filters). Run i has the key ``mc.realization_keys(seed,
    0, i, 1)``; runs go through the vmapped kernel in fixed batches of ``MC_BATCH`` keys (the last
    padded and trimmed), so results are bit-identical for any ``chunk`` (XLA may round otherwise
@@ -20,7 +20,7 @@ Two parts, both through ``araim``'s EKF-RAIM (NIS detection, subset exclusion, X
    same runs are repeated with a Gauss-Markov multipath error on every tower
    (``sens_mp_sigma_m``, ``sens_mp_tau_s``) that the filter does not model: the sensitivity.
 
-Choices (the seed is silent; ``geometry.trajectory`` notes and ``araim.ekf_raim`` give the
+Choices (the seed is silent; ``sim.trajectory`` notes and ``araim.ekf_raim`` give the
 sources): sigma_pr 2 m white ("meter-level" LTE), fault +30 m on tower 1 from t = 25 s (the onset
 is the seed's detection time, the magnitude our NLOS choice), P_FA 1e-5, P_MD 1e-3, HAL 30 m,
 d = N_s (seed 002; seed 000's N_s - 4 is ``dof=n_s-4``: with 5 towers it leaves the exclusion
@@ -37,7 +37,7 @@ import jax
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry, mc
+from oaraim import geometry, mc, sim
 from oaraim.araim import ekf_raim, ekf_replay
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -56,8 +56,8 @@ from oaraim.studies.base import (
 MC_BATCH = 16
 FILTERS = ("without_exclusion", "with_exclusion")
 VARIANTS = ("nominal", "multipath")
-SUMMARY_FIELDS = ekf_raim.DriveSummary._fields
-#: towers of both drives (geometry.drive_seed000 / drive_seed002)
+SUMMARY_FIELDS = sim.DriveSummary._fields
+#: towers of both drives (sim.drive_seed000 / drive_seed002)
 N_TOWERS = 5
 
 
@@ -83,7 +83,7 @@ class EkfDriveStudy(Study):
     """Shared by seed000-ekf-raim and seed002-outlier: a scenario, its published numbers, the
     single replayed drive and the Monte Carlo."""
 
-    scenario_fn = staticmethod(geometry.drive_seed000)
+    scenario_fn = staticmethod(sim.drive_seed000)
     fig_prefix = "seed000"
     published_rows: tuple = ()
     published_detection_s: float = 25.0
@@ -94,7 +94,7 @@ class EkfDriveStudy(Study):
     test_realizations = 4
 
     def __init__(self):
-        # defaults = the scenario's values (geometry.trajectory._scenario; tested), written
+        # defaults = the scenario's values (sim.trajectory._scenario; tested), written
         # here so that importing the registry does not build the trajectory
         self._scenario = None
         self.params = {
@@ -178,7 +178,7 @@ class EkfDriveStudy(Study):
             prov["recording"] = {"path": p["recording"], "meta": rec.meta}
         else:
             key0 = mc.realization_keys(seed, 0, 0, 1)[0]
-            rec = ekf_replay.synthesize_recording(
+            rec = sim.synthesize_recording(
                 sc, key0, sigma_pr_m=p["sigma_pr_m"], mp_sigma_m=p["mp_sigma_m"],
                 mp_tau_s=p["mp_tau_s"], fault_tower=tower, fault_onset_s=onset,
                 fault_bias_m=p["fault_bias_m"], duration_s=self._duration(p))
@@ -198,7 +198,7 @@ class EkfDriveStudy(Study):
         ds = self._trace_dataset(tr, p)
         mcres = {}
         if p["recording"] == NO_RECORDING:
-            setup = ekf_raim.drive_setup(sc, cfg=cfg, duration_s=self._duration(p))
+            setup = sim.drive_setup(sc, cfg=cfg, duration_s=self._duration(p))
             variants = [("nominal", p["mp_sigma_m"], p["mp_tau_s"])]
             if p["sens_mp_sigma_m"] > 0:
                 variants.append(("multipath", p["sens_mp_sigma_m"], p["sens_mp_tau_s"]))
@@ -490,7 +490,7 @@ def _mc_fn():
     global _MC_FN
     if _MC_FN is None:
         def f(keys, setup, sigma, mps, mpt, tower, onset, bias, hal, dof_off):
-            return ekf_raim.monte_carlo_drive(
+            return sim.monte_carlo_drive(
                 keys, setup, sigma_pr_m=sigma, mp_sigma_m=mps, mp_tau_s=mpt,
                 fault_tower=tower, fault_onset_s=onset, fault_bias_m=bias, hal_m=hal,
                 dof_offset=dof_off)
@@ -507,7 +507,7 @@ class Seed000EkfRaim(EkfDriveStudy):
                    "pseudorange noise, initial error; both filters)")
     default_realizations = 200
     quick_realizations = 20
-    scenario_fn = staticmethod(geometry.drive_seed000)
+    scenario_fn = staticmethod(sim.drive_seed000)
     fig_prefix = "seed000"
     published_detection_s = 25.0
     published_length_km = 1.35

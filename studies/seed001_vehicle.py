@@ -2,7 +2,7 @@
 GPS-only vs GPS-SOP (published 15.01 m vs 8.29 m, a 44.77 % reduction).
 
 Setup (stated choices; seed 001 gives neither route, date, rates nor sigmas):
-  * Drive: ``geometry.drive_seed000()`` (the 1.35 km downtown Riverside, CA drive with 5 LTE
+  * Drive: ``sim.drive_seed000()`` (the 1.35 km downtown Riverside, CA drive with 5 LTE
     towers of the same group's seed 000; seed 001's vehicle experiment is by the same group, in
     the same area, with 5 LTE towers), or ``drive=seed002-drive``. Epochs at the scenario's
     10 Hz pseudorange rate over the drive (``duration_s`` shortens it).
@@ -10,7 +10,7 @@ Setup (stated choices; seed 001 gives neither route, date, rates nor sigmas):
     if missing) at ``start_h`` = 18.0 h GPS time (10:00 local), or the nominal 24-slot
     constellation on ``--set nav=nominal`` (provenance says which); mask 15 deg (seed 001
     section 3.2: "typically around 15").
-  * Measurements: ``geometry.gnss_scenario`` (module docstring). Noise: GPS N(0, C_acc(el))
+  * Measurements: ``sim.gnss`` (module docstring). Noise: GPS N(0, C_acc(el))
     (ADD accuracy model, sigma_URE = 2/3 sigma_URA = 0.67 m plus troposphere and user terms),
     LTE N(0, 2^2 m^2) (the scenario's "meter-level" LTE ranging).
   * Slope RAIM of seed 001 section 3.1 on the WNLS solution (``araim.snapshot.replay`` with
@@ -29,10 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry
+from oaraim import geometry, sim
 from oaraim.araim import snapshot
 from oaraim.araim.error_models import gnss_variances
-from oaraim.geometry import gnss_scenario, gpstime
+from oaraim.geometry import epoch_geometry, gpstime
 from oaraim.geometry.recording import load_recording
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -72,7 +72,7 @@ class Seed001Vehicle(Study):
     test_realizations = 64
     nav_file = NAV_FILE
     params = {
-        "drive": Param("seed000-drive", parse_drive, "scenario of geometry.trajectory"),
+        "drive": Param("seed000-drive", parse_drive, "scenario of sim.trajectory"),
         "duration_s": Param(0.0, in_range(0.0, 1e4), "replay the first duration_s of the drive "
                             "(0: all of it)", "s"),
         "rate_hz": Param(10.0, in_range(0.1, 100.0), "epoch rate (scenario: 10 Hz)", "Hz"),
@@ -99,11 +99,11 @@ class Seed001Vehicle(Study):
         """(EpochGeometry, noise-free pseudoranges or the recorded ones, corrections, desc,
         recorded?)."""
         if params["recording"] != NO_RECORDING:
-            m = gnss_scenario.from_recording(load_recording(params["recording"]),
-                                             params["mask_deg"])
+            m = epoch_geometry.from_recording(load_recording(params["recording"]),
+                                              params["mask_deg"])
             return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}", \
                 True
-        scen = getattr(geometry, DRIVES[params["drive"]])()
+        scen = getattr(sim, DRIVES[params["drive"]])()
         dur = float(scen.traj.t_s[-1])
         if params["duration_s"] > 0:
             dur = min(dur, params["duration_s"])
@@ -115,9 +115,9 @@ class Seed001Vehicle(Study):
             day = _day_start(source, True)
         else:
             day = float(gpstime.gps_seconds(2022, 1, 1))
-        geom = gnss_scenario.scenario_geometry(scen, t, day + 3600.0 * params["start_h"], source,
-                                               desc, real, params["mask_deg"])
-        pr0 = gnss_scenario.pseudoranges(geom, 0.0)
+        geom = sim.scenario_geometry(scen, t, day + 3600.0 * params["start_h"], source, desc,
+                                     real, params["mask_deg"])
+        pr0 = sim.pseudoranges(geom, 0.0)
         return geom, pr0, np.where(geom.valid, geom.tx_clock_m, 0.0), desc, False
 
     def run(self, params, realizations, seed, progress):

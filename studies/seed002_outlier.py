@@ -2,7 +2,7 @@
 
 The same EKF-RAIM as seed 000 (``studies.seed000_ekf_raim``: one drive synthesized, written in
 the recorded-drive format, loaded and replayed for the figures; ``--set recording=PATH`` replays
-a user's drive; a Monte Carlo of ``--realizations`` runs), on ``geometry.drive_seed002()``: the
+a user's drive; a Monte Carlo of ``--realizations`` runs), on ``sim.drive_seed002()``: the
 1.4 km downtown Riverside drive, 5 LTE towers (the seed's "5 LTE base stations"), NIS with
 d = N_s (seed 002 section 3), an outlier of +30 m on tower 1 from t = 95 s (the seed's detection
 time: its Fig. 3 threshold is exceeded at t = 95 s; the seed names neither tower nor magnitude,
@@ -10,7 +10,7 @@ we keep seed 000's tower 1 and our 30 m NLOS choice). Published: 2D RMSE 8.2 -> 
 maximum 2D error 20.4 -> 11.6 m (43.3 %).
 """
 
-from oaraim import geometry
+from oaraim import sim
 from oaraim.studies.seed000_ekf_raim import EkfDriveStudy
 
 
@@ -22,7 +22,7 @@ class Seed002Outlier(EkfDriveStudy):
                    "pseudorange noise, initial error; both filters)")
     default_realizations = 200
     quick_realizations = 20
-    scenario_fn = staticmethod(geometry.drive_seed002)
+    scenario_fn = staticmethod(sim.drive_seed002)
     fig_prefix = "seed002"
     published_detection_s = 95.0
     published_length_km = 1.4

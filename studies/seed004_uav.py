@@ -2,7 +2,7 @@
 epoch (Figs. 6-9).
 
 Setup:
-  * Flight: ``geometry.uav_seed004()`` (815 m in 220 s, 11 towers, origin downtown Riverside,
+  * Flight: ``sim.uav_seed004()`` (815 m in 220 s, 11 towers, origin downtown Riverside,
     CA); the seed gives 2880 epochs and 220 s but no rate: we take 2880 epochs spread uniformly
     over the flight (t_k = k 220 / 2880 s, 13.09 Hz). One realization = one epoch;
     ``--realizations N`` replays the first N of the ``n_epochs`` epochs.
@@ -15,7 +15,7 @@ Setup:
     numbered carrier A first, then B, then C, and are added in that order (seed 004 VII-D:
     "the order of adding SOPs followed the numbering"): +1 = one SOP of carrier A (a new
     constellation with one SOP: Theorem 2), +2 and +4 = carrier A, +8 = A and B, +11 = all.
-  * Measurements: ``geometry.gnss_scenario`` (module docstring); noise GPS N(0, C_acc) (ADD
+  * Measurements: ``sim.gnss`` (module docstring); noise GPS N(0, C_acc) (ADD
     accuracy model, sigma_URE = 2/3 sigma_URA), LTE N(0, ``sigma_lte_noise_m``^2) with 2 m
     (the scenario's "meter-level" LTE ranging); the noise of epoch k is drawn from
     fold_in(key(seed), k), so an epoch's result does not depend on N. ``--set recording=PATH``
@@ -47,13 +47,13 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, geometry
+from oaraim import araim, sim
 from oaraim.araim import snapshot
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fde import solution_separation
 from oaraim.araim.mhss import required_order
-from oaraim.geometry import gnss_scenario, gpstime
+from oaraim.geometry import epoch_geometry, gpstime
 from oaraim.geometry.recording import load_recording
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -116,9 +116,9 @@ def sop_order(n_towers):
 def synthesize(params, seed, scenario=None):
     """(EpochGeometry, pseudorange_m, correction_m, description) for the study's inputs."""
     if params["recording"] != NO_RECORDING:
-        m = gnss_scenario.from_recording(load_recording(params["recording"]), params["mask_deg"])
+        m = epoch_geometry.from_recording(load_recording(params["recording"]), params["mask_deg"])
         return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}"
-    scenario = scenario or geometry.uav_seed004()
+    scenario = scenario or sim.uav_seed004()
     n_tw = int(scenario.towers_enu_m.shape[0])
     _, carrier = sop_order(n_tw)
     source, desc, real = resolve_sky(params["nav"])
@@ -128,11 +128,11 @@ def synthesize(params, seed, scenario=None):
     else:
         day = float(gpstime.gps_seconds(2022, 1, 1))
     t0 = day + 3600.0 * params["start_h"]
-    t = gnss_scenario.epoch_times(FLIGHT_S, params["n_epochs"])
-    geom = gnss_scenario.scenario_geometry(scenario, t, t0, source, desc, real,
-                                           params["mask_deg"], carrier)
+    t = sim.epoch_times(FLIGHT_S, params["n_epochs"])
+    geom = sim.scenario_geometry(scenario, t, t0, source, desc, real, params["mask_deg"],
+                                 carrier)
     noise = draw_noise(geom, seed, params["sigma_ura_gps_m"], params["sigma_lte_noise_m"])
-    pr = gnss_scenario.pseudoranges(geom, noise)
+    pr = sim.pseudoranges(geom, noise)
     return geom, pr, np.where(geom.valid, geom.tx_clock_m, 0.0), desc
 
 

@@ -7,10 +7,11 @@ import pytest
 from scipy import stats
 from scipy.linalg import expm
 
+from oaraim import sim
 from oaraim.araim import ekf, ekf_raim
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
-from oaraim.geometry import imu, trajectory
+from oaraim.geometry import imu
 
 # ----------------------------------------------------------------------------------------
 # A plain linear Kalman filter in NumPy (the reference)
@@ -271,9 +272,9 @@ DURATION_S = 30.0
 
 @pytest.fixture(scope="module")
 def drive():
-    setup = ekf_raim.drive_setup(trajectory.drive_seed000(), duration_s=DURATION_S)
+    setup = sim.drive_setup(sim.drive_seed000(), duration_s=DURATION_S)
     keys = jax.random.split(jax.random.key(2024), N_RUNS)
-    run = jax.jit(jax.vmap(lambda k, b, off: ekf_raim.simulate_drive(
+    run = jax.jit(jax.vmap(lambda k, b, off: sim.simulate_drive(
         k, setup, fault_bias_m=b, fault_onset_s=25.0, dof_offset=off, traces=True),
         in_axes=(0, None, None)))
     return setup, keys, run

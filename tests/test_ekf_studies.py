@@ -7,8 +7,8 @@ import jax
 import numpy as np
 import pytest
 
-from oaraim import geometry, mc
-from oaraim.araim import ekf_raim, ekf_replay
+from oaraim import geometry, mc, sim
+from oaraim.araim import ekf_replay
 from oaraim.studies.execute import run_study
 from oaraim.studies.registry import STUDIES
 
@@ -18,16 +18,16 @@ DUR_S = 30.0  # the first 30 s of the seed 000 drive: fault on tower 1 from 25 s
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
     """Run 0 of seed 0: synthesized, written (Parquet), loaded, replayed; and the direct run."""
-    sc = geometry.drive_seed000()
+    sc = sim.drive_seed000()
     key = mc.realization_keys(0, 0, 0, 1)[0]
-    rec = ekf_replay.synthesize_recording(sc, key, duration_s=DUR_S)
+    rec = sim.synthesize_recording(sc, key, duration_s=DUR_S)
     folder = tmp_path_factory.mktemp("drive") / "drive"
     geometry.write_recording(folder, rec)
     loaded = geometry.load_recording(folder)
     tr = ekf_replay.replay_ekf_raim(loaded)
-    setup = ekf_raim.drive_setup(sc, duration_s=DUR_S)
-    summ, direct = ekf_raim.simulate_drive(key, setup, sigma_pr_m=2.0, fault_tower=0,
-                                           fault_onset_s=25.0, fault_bias_m=30.0, traces=True)
+    setup = sim.drive_setup(sc, duration_s=DUR_S)
+    summ, direct = sim.simulate_drive(key, setup, sigma_pr_m=2.0, fault_tower=0,
+                                      fault_onset_s=25.0, fault_bias_m=30.0, traces=True)
     return sc, rec, folder, loaded, tr, jax.device_get(direct)
 
 
@@ -113,8 +113,8 @@ def test_missing_epochs_become_prediction_only(drive):
 
 
 def test_study_defaults_are_the_scenario_values():
-    for name, sc in (("seed000-ekf-raim", geometry.drive_seed000()),
-                     ("seed002-outlier", geometry.drive_seed002())):
+    for name, sc in (("seed000-ekf-raim", sim.drive_seed000()),
+                     ("seed002-outlier", sim.drive_seed002())):
         p = STUDIES[name].validate({})
         assert p["sigma_pr_m"] == sc.sigma_pr_m and p["fault_bias_m"] == sc.fault_bias_m
         assert p["fault_tower"] == sc.fault_tower + 1 and p["fault_onset_s"] == sc.fault_onset_s

@@ -27,7 +27,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from oaraim import geometry
+from oaraim import geometry, sim
 from oaraim.geometry import ephemeris, recording, rinex_obs
 from oaraim.studies import availability_map
 from tests.test_almanac import _sem_text
@@ -232,7 +232,7 @@ TOWERS = (b"lat_deg,lon_deg,height_m,carrier\n"
 def recording_folder(tmp_path_factory):
     """The example drive written as CSV tables (half a second: a few rows per table)."""
     folder = tmp_path_factory.mktemp("recording")
-    rec = recording.example_recording(duration_s=0.5, imu_rate_hz=10.0, pr_rate_hz=4.0)
+    rec = sim.example_recording(duration_s=0.5, imu_rate_hz=10.0, pr_rate_hz=4.0)
     recording.write_recording(folder / "drive", rec, format="csv")
     return folder / "drive"
 

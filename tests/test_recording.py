@@ -10,14 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from oaraim import geometry
+from oaraim import geometry, sim
 from oaraim.geometry import recording as R
 from oaraim.geometry.recording import RecordingError
 
 
 @pytest.fixture(scope="module")
 def rec():
-    return R.example_recording(with_gnss=True)
+    return sim.example_recording(with_gnss=True)
 
 
 def _tables(rec):
@@ -411,9 +411,10 @@ def test_extra_columns_kept_and_near_misses_warned(rec, tmp_path):
 
 def test_public_exports():
     for name in ("Recording", "RecordingError", "load_recording", "write_recording",
-                 "example_recording", "pseudorange_matrix", "gnss_matrix", "tower_clock_m"):
+                 "pseudorange_matrix", "gnss_matrix", "tower_clock_m"):
         assert getattr(geometry, name) is getattr(R, name)
         assert name in geometry.__all__
+    assert "example_recording" in sim.__all__  # a synthesized recording: oaraim.sim
 
 
 def test_csv_floats_round_trip_bit_exact(tmp_path):

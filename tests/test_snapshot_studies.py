@@ -1,11 +1,11 @@
 """Snapshot GNSS + SOP studies: seed001-vehicle and seed004-uav (tiny runs), and the
-recording round trip of the synthesis (geometry.gnss_scenario)."""
+recording round trip of the synthesis (sim.gnss)."""
 
 import numpy as np
 import pytest
 
-from oaraim import geometry
-from oaraim.geometry import gnss_scenario
+from oaraim import geometry, sim
+from oaraim.geometry import epoch_geometry
 from oaraim.studies.registry import STUDIES
 from oaraim.studies.seed004_uav import synthesize
 
@@ -72,9 +72,9 @@ def test_recording_round_trip_replays_identically(tmp_path, shared_data):
     p = study.validate({"n_epochs": "40", "exclusion": "false", "fault_onset_s": "1"})
     geom, pr, corr, _ = synthesize(p, 0)
     sig = np.where(geom.is_gps, 1.0, 2.0)
-    rec = gnss_scenario.to_recording(geom, pr, sigma_m=sig, name="uav-test")
+    rec = sim.to_recording(geom, pr, sigma_m=sig, name="uav-test")
     folder = geometry.write_recording(tmp_path / "uav", rec)
-    m = gnss_scenario.from_recording(geometry.load_recording(folder), p["mask_deg"])
+    m = epoch_geometry.from_recording(geometry.load_recording(folder), p["mask_deg"])
     assert list(m.geom.ids) == list(geom.ids)
     assert np.array_equal(m.geom.valid, geom.valid)
     assert np.allclose(m.pseudorange_m + m.correction_m, pr + corr, atol=1e-6)

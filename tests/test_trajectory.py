@@ -1,4 +1,4 @@
-"""Scenario synthesis: trajectories, IMU error model, clocks (geometry.trajectory/imu/clocks)."""
+"""Scenario synthesis: trajectories, IMU error model, clocks (sim.trajectory, geometry.imu)."""
 
 import jax
 import jax.numpy as jnp
@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from oaraim import geometry
 from oaraim.araim import ekf
-from oaraim.geometry import clocks, imu, trajectory
-from oaraim.geometry.frames import C_M_S
+from oaraim.constants import C_M_S
+from oaraim.geometry import clocks, imu
+from oaraim.sim import measurement, trajectory
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +34,8 @@ def test_scenarios_match_the_seeds(scenarios):
 
 def test_normal_gravity_somigliana():
     # NIMA TR8350.2: 9.7803253359 at the equator, 9.8321849378 at the poles
-    assert trajectory.normal_gravity(0.0) == pytest.approx(9.7803253359, abs=1e-10)
-    assert trajectory.normal_gravity(np.pi / 2) == pytest.approx(9.8321849378, abs=1e-9)
+    assert geometry.normal_gravity_mps2(0.0) == pytest.approx(9.7803253359, abs=1e-10)
+    assert geometry.normal_gravity_mps2(np.pi / 2) == pytest.approx(9.8321849378, abs=1e-9)
 
 
 def test_level_body_frame(scenarios):
@@ -167,5 +169,5 @@ def test_clock_step_covariance():
 def test_tower_clock_polynomial_and_fault():
     c = np.asarray(clocks.tower_clock_m(2.0, jnp.array([1e-6, -2e-6]), jnp.array([1e-8, 0.0])))
     np.testing.assert_allclose(c, C_M_S * np.array([1e-6 + 2e-8, -2e-6]))
-    f = np.asarray(trajectory.fault_bias_m(jnp.array([24.9, 25.0]), 25.0, 30.0, 0, 3))
+    f = np.asarray(measurement.fault_bias_m(jnp.array([24.9, 25.0]), 25.0, 30.0, 0, 3))
     np.testing.assert_array_equal(f, [[0, 0, 0], [30, 0, 0]])

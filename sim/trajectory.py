@@ -1,11 +1,14 @@
-"""Vehicle trajectories, LTE tower layouts and pseudoranges of the synthetic drives and flight.
+"""Vehicle trajectories and LTE tower layouts of the synthetic drives and flight (the scenarios).
+
+Their measurements and errors are drawn by ``sim.measurement`` (one model for every drive,
+flight and synthesized recording); ``Scenario.errors`` is a scenario's ``ErrorModel``.
 
 Frame and gravity. Everything is expressed in a local East-North-Up (ENU) frame fixed at the
 start point (DESIGN.md: the EKF navigates in such a frame), treated as inertial: a flat,
 non-rotating Earth with constant normal gravity g_n = [0, 0, -g(lat, h)] of the start point
-(WGS-84 Somigliana formula with the free-air height term, ``normal_gravity``). Earth rate and
-transport rate are neglected in the truth and in the filter alike, so the synthetic world is
-self-consistent; replaying real IMU data would need them (Groves 2013, ch. 5).
+(WGS-84 Somigliana formula with the free-air height term, ``geometry.normal_gravity_mps2``).
+Earth rate and transport rate are neglected in the truth and in the filter alike, so the
+synthetic world is self-consistent; replaying real IMU data would need them (Groves 2013, ch. 5).
 
 Body frame: right-handed x front, y left, z up (DESIGN.md corrects seed 000's left-handed
 "y right"). Attitude: JPL quaternion q = [q_vec, q_w] (scalar last) of the rotation from the
@@ -27,26 +30,11 @@ trapezoid rule on a grid ``substeps`` times finer than the IMU.
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-#: WGS-84 normal gravity at the equator / poles, m/s^2 (NIMA TR8350.2 Table 3.4)
-_GAMMA_E = 9.7803253359
-_GAMMA_P = 9.8321849378
-#: WGS-84 first eccentricity squared (NIMA TR8350.2 Table 3.3)
-_E2 = 6.69437999014e-3
-#: Somigliana constant k = (b gamma_p - a gamma_e) / (a gamma_e) (NIMA TR8350.2 eq. 4-1)
-_K_SOMIGLIANA = 0.00193185265241
-#: free-air gradient of normal gravity near the surface, 1/s^2 (NIMA TR8350.2 eq. 4-3, first term)
-_FREE_AIR = 3.0877e-6
-
-
-def normal_gravity(lat_rad, h_m=0.0):
-    """Magnitude of WGS-84 normal gravity at geodetic latitude and small height, m/s^2."""
-    s2 = np.sin(lat_rad) ** 2
-    g0 = _GAMMA_E * (1.0 + _K_SOMIGLIANA * s2) / np.sqrt(1.0 - _E2 * s2)
-    return float(g0 - _FREE_AIR * h_m)
+from oaraim.geometry.frames import normal_gravity_mps2
+from oaraim.sim.measurement import ErrorModel
 
 
 class Segment(NamedTuple):
@@ -158,34 +146,6 @@ def path_length(segments, speed0_m_s=0.0, climb0_m_s=0.0, samples_per_s=200):
 
 
 # --------------------------------------------------------------------------------------------
-# Pseudoranges (seed 000 eq. 3), multipath and injected faults
-
-
-def pseudorange_true(pos_m, towers_m, rx_clk_bias_m, tower_clk_m):
-    """Error-free pseudorange ||r - r_s|| + c (dt_r - dt_s) (seed 000 eq. 3), shape (..., L).
-
-    ``pos_m`` (..., 3), ``towers_m`` (..., L, 3), ``rx_clk_bias_m`` (...), ``tower_clk_m`` (..., L).
-    """
-    rng = jnp.linalg.norm(pos_m[..., None, :] - towers_m, axis=-1)
-    return rng + jnp.asarray(rx_clk_bias_m)[..., None] - tower_clk_m
-
-
-def fault_bias_m(t_s, onset_s, magnitude_m, tower_index, n_towers):
-    """Injected fault: a constant bias on one tower from ``onset_s`` on, shape (..., L)."""
-    on = (jnp.asarray(t_s) >= onset_s)[..., None]
-    sel = jnp.arange(n_towers) == tower_index
-    return jnp.where(on & sel, magnitude_m, 0.0)
-
-
-def pseudorange_sample(key, pos_m, towers_m, rx_clk_bias_m, tower_clk_m, sigma_m,
-                       bias_m=0.0):
-    """Measured pseudoranges: truth + N(0, sigma^2) white noise + ``bias_m`` (multipath/NLOS and
-    faults, (..., L))."""
-    z0 = pseudorange_true(pos_m, towers_m, rx_clk_bias_m, tower_clk_m)
-    return z0 + bias_m + sigma_m * jax.random.normal(key, z0.shape)
-
-
-# --------------------------------------------------------------------------------------------
 # Scenarios
 
 
@@ -214,6 +174,12 @@ class Scenario(NamedTuple):
     origin_lon_deg: float
     origin_h_m: float
     notes: dict
+
+    @property
+    def errors(self) -> ErrorModel:
+        """The scenario's pseudorange error parameters as the measurement model takes them."""
+        return ErrorModel(self.sigma_pr_m, self.mp_sigma_m, self.mp_tau_s, self.fault_tower,
+                          self.fault_onset_s, self.fault_bias_m)
 
 
 #: downtown Riverside, California (seed 000 section IV-A), WGS-84, approximate city centre
@@ -273,7 +239,7 @@ def _size_last_cruise(cruise_s, turns, length_m):
 
 def _scenario(name, segs, heading0, towers, n_towers, onset_s, notes, lat, lon, h, dt_s,
               speed0=0.0, climb0=0.0):
-    g = normal_gravity(np.deg2rad(lat), h)
+    g = normal_gravity_mps2(np.deg2rad(lat), h)
     traj = trajectory(segs, dt_s=dt_s, heading0_rad=heading0, speed0_m_s=speed0,
                       climb0_m_s=climb0, gravity_m_s2=g)
     return Scenario(

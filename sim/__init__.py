@@ -1,0 +1,57 @@
+"""What the world does: simulated drives and flights (truth trajectory, measurements and their
+errors) and synthesized recordings.
+
+``sim.measurement`` is the one measurement model (pseudoranges, receiver clock, IMU, and the
+error world's parameters as one ``ErrorModel`` pytree) that every simulated drive, flight and
+recording draws from; ``sim.trajectory`` the scenarios (truth motion, tower layouts);
+``sim.drive`` the Monte Carlo drives through the receiver's EKF-RAIM; ``sim.gnss`` the GNSS +
+SOP epochs of the snapshot studies; ``sim.recordings`` simulated runs in the recorded-data
+format.
+
+Layering: ``sim`` imports ``geometry`` and, to run a receiver over a simulated drive,
+``araim``; ``araim`` and ``geometry`` never import ``sim``.
+"""
+
+if __name__ != "oaraim.sim":  # the source folder is importable from the checkout's root
+    raise ImportError(f"import oaraim.sim, not {__name__}: the folder sim/ installs as "
+                      "oaraim.sim (pip install -e .), which also enables JAX's float64 mode")
+
+from oaraim.sim import drive, gnss, measurement, recordings, trajectory
+from oaraim.sim.drive import (
+    DriveSetup,
+    DriveSummary,
+    DriveTrace,
+    drive_setup,
+    monte_carlo_drive,
+    simulate_drive,
+)
+from oaraim.sim.gnss import epoch_times, pseudoranges, scenario_geometry, to_recording
+from oaraim.sim.measurement import (
+    EpochMeasurements,
+    ErrorModel,
+    WorldState,
+    drive_epoch,
+    fault_bias_m,
+    pseudorange_from_range,
+    pseudorange_sample,
+    pseudorange_true,
+)
+from oaraim.sim.recordings import example_recording, synthesize_recording
+from oaraim.sim.trajectory import (
+    SCENARIOS,
+    Scenario,
+    Segment,
+    Trajectory,
+    drive_seed000,
+    drive_seed002,
+    uav_seed004,
+)
+
+__all__ = [
+    "SCENARIOS", "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel",
+    "Scenario", "Segment", "Trajectory", "WorldState", "drive", "drive_epoch", "drive_seed000",
+    "drive_seed002", "drive_setup", "epoch_times", "example_recording", "fault_bias_m", "gnss",
+    "measurement", "monte_carlo_drive", "pseudorange_from_range", "pseudorange_sample",
+    "pseudorange_true", "pseudoranges", "recordings", "scenario_geometry", "simulate_drive",
+    "synthesize_recording", "to_recording", "trajectory", "uav_seed004",
+]
