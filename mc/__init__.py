@@ -5,7 +5,7 @@ if __name__ != "oaraim.mc":  # the source folder is importable from the checkout
     raise ImportError(f"import oaraim.mc, not {__name__}: the folder mc/ installs as "
                       "oaraim.mc (pip install -e .), which also enables JAX's float64 mode")
 
-from oaraim.mc.keys import realization_keys
+from oaraim.mc.keys import STREAMS, realization_keys, stream
 from oaraim.mc.reduce import BLOCK, EmpiricalCDF, Histogram, Mean
 from oaraim.mc.runner import ChunkPlan, run_chunked
 from oaraim.mc.store import provenance, read_summary, write_json, write_results
@@ -16,6 +16,7 @@ from oaraim.mc.sweep import Axis, SweepResult, run_sweep
 
 __all__ = [
     "BLOCK",
+    "STREAMS",
     "Axis",
     "ChunkPlan",
     "EmpiricalCDF",
@@ -27,6 +28,7 @@ __all__ = [
     "realization_keys",
     "run_chunked",
     "run_sweep",
+    "stream",
     "write_json",
     "write_results",
 ]

@@ -1,8 +1,14 @@
-"""PRNG keys of Monte Carlo realizations.
+"""PRNG keys of Monte Carlo realizations, and the named random streams derived from them.
 
 The key of realization i of grid cell c is fold_in(fold_in(key(seed), c), i): it depends on
 (study seed, c, i) alone, so every realization is the same whatever the chunk size, worker count
 or order of execution (DESIGN.md, Randomness).
+
+Inside a realization (or a cell), independent draws take named streams:
+``stream(key, name, index)`` is ``fold_in(key, STREAMS[name] + index)``. The table's integer
+tags are the offsets the studies wrote inline before the table existed, so every key is what it
+was; a new draw gets a new name whose tag range is disjoint from the others used under the
+same parent key (docs/conventions.md lists them).
 """
 
 import jax
@@ -27,3 +33,33 @@ def realization_keys(seed: int, cell: int, start: int, count: int):
         raise ValueError(f"realization indices must lie in [0, 2^32), got {start}..{start + count}")
     idx = jnp.arange(start, start + count, dtype=jnp.uint32)
     return _fold_many(cell_key(seed, cell), idx)
+
+
+#: name -> integer tag of the named streams, grouped by the parent key they are derived from;
+#: an indexed stream uses tags tag .. tag + n - 1 (n given in the comment)
+STREAMS = {
+    # under the key of one geometry draw of the seed 004 studies (studies.seed004_common)
+    "gps_epoch": 0,  # the epoch of the day's GPS sky table
+    "bpp_towers": 1,  # the BPP tower placement (seed 004 section III-D)
+    # under the key of one integrity-risk cell (studies.integrity_risk)
+    "risk_geometry": 0,  # + geometry index g, n = geometries (below 1000)
+    "risk_cross_check": 1000,  # + scenario index, n = 3 (the IS-vs-crude cross-check)
+    # under the key of one integrity-risk geometry ("risk_geometry")
+    "risk_table": 2,  # the importance-sampling estimates of the geometry's scenarios
+    "risk_ramp": 100,  # + 2 j + direction (0 horizontal, 1 vertical) for SOP j, n = 2 n_sops
+    # under the key of one cross-check scenario ("risk_cross_check")
+    "risk_rerun": 1,  # the timed second run (the first, compiling run uses the parent key)
+}
+
+
+def stream(key, name: str, index=0):
+    """Key of the named random stream ``name`` under ``key`` (``index`` for an indexed stream:
+    the tower, the scenario, the geometry): ``fold_in(key, STREAMS[name] + index)``.
+    jit-safe (``index`` may be traced); an unknown name raises ``KeyError`` naming the known
+    ones."""
+    try:
+        tag = STREAMS[name]
+    except KeyError:
+        raise KeyError(f"unknown random stream {name!r}; the streams are {sorted(STREAMS)} "
+                       "(mc.keys.STREAMS: add a name with its tag there)") from None
+    return jax.random.fold_in(key, tag + index)

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry
+from oaraim import geometry, mc
 from oaraim.araim import integrity_risk as ir
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.mc.sweep import Values
@@ -120,12 +120,12 @@ class RiskCell:
     def table(self, g, key):
         if g in self.cache:
             return self.cache[g]
-        kg = jax.random.fold_in(key, g)
+        kg = mc.stream(key, "risk_geometry", g)
         epoch, rows, x, p_const = geometry_inputs(kg, self.jtable, self.n_sops, self.p)
         maps = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"],
                                x["b_nom"], x["p_sat"], p_const, c.BUDGET, valid=x["valid"],
                                max_order=self.max_order, fault_modes=self.p["fault_modes"])
-        t = ir.risk_table(maps, jax.random.fold_in(kg, 2), self.x,
+        t = ir.risk_table(maps, mc.stream(kg, "risk_table"), self.x,
                           n_samples=self.p["samples"], ce_samples=self.p["ce_samples"],
                           ce_rounds=self.p["ce_rounds"], nominal_bias=self.p["nominal_bias"])
         S, X = t.kind.size, self.X
@@ -202,7 +202,7 @@ def geometry_zero_maps(params, key, n_sops, budget, max_order):
     the GPS epoch) under ``budget``."""
     table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
     jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
-    kg = jax.random.fold_in(key, 0)
+    kg = mc.stream(key, "risk_geometry", 0)
     epoch, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
     m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
                         x["p_sat"], p_const, budget, valid=x["valid"], max_order=max_order,
@@ -223,14 +223,14 @@ def cross_check(params, key, crude_samples):
                                     worst, ir.VERTICAL, 1.0),
                                    ("largest-slope satellite at A_det, horizontal", ir.SINGLE,
                                     worst, ir.HORIZONTAL, 1.0)):
-        k = jax.random.fold_in(key, 1000 + len(out))
+        k = mc.stream(key, "risk_cross_check", len(out))
         runs = {}
         for mode, kw in (("is", opts), ("crude", dict(n_samples=crude_samples, crude=True,
                                                       nominal_bias=params["nominal_bias"]))):
             jax.block_until_ready(ir.scenario_estimate(m, kind, src, -1, d, xm, k, **kw))
             t0 = time.perf_counter()
             e = jax.block_until_ready(ir.scenario_estimate(
-                m, kind, src, -1, d, xm, jax.random.fold_in(k, 1), **kw))[2]
+                m, kind, src, -1, d, xm, mc.stream(k, "risk_rerun"), **kw))[2]
             runs[mode] = (float(e.p_md), float(e.se_md), int(e.hits_md),
                           time.perf_counter() - t0)
         (pi, si, _, ti), (pc, sc, hc, tc) = runs["is"], runs["crude"]
@@ -255,7 +255,7 @@ def sop_ramps(params, key, n_sops):
         for d in (ir.HORIZONTAL, ir.VERTICAL):
             r = ir.ramp_risk(m, first + j, d, params["ramp_rate_mps"],
                              params["ramp_duration_s"], params["ramp_epoch_s"],
-                             jax.random.fold_in(kg, 100 + 2 * j + d),
+                             mc.stream(kg, "risk_ramp", 2 * j + d),
                              n_samples=params["samples"], ce_samples=params["ce_samples"],
                              ce_rounds=params["ce_rounds"], nominal_bias=params["nominal_bias"])
             pj.append(r.p_md)

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim import geometry
+from oaraim import geometry, mc
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
@@ -144,13 +144,13 @@ def gps_sky_table(nav, mask_deg, step_s):
 def draw_gps(key, table_az, table_el, table_valid):
     """One realization's GPS sky: an epoch uniform over the day's table. Returns the epoch
     index and (az, el, valid) of shape (S,)."""
-    e = jax.random.randint(jax.random.fold_in(key, 0), (), 0, table_az.shape[0])
+    e = jax.random.randint(mc.stream(key, "gps_epoch"), (), 0, table_az.shape[0])
     return e, table_az[e], table_el[e], table_valid[e]
 
 
 def draw_sops(key, n_sops, d_min_m, d_max_m, h_min_m, h_max_m):
     """One realization's BPP towers (seed 004 section III-D), independent of the GPS draw."""
-    return geometry.bpp_towers(jax.random.fold_in(key, 1), n_sops, d_min_m, d_max_m, h_min_m,
+    return geometry.bpp_towers(mc.stream(key, "bpp_towers"), n_sops, d_min_m, d_max_m, h_min_m,
                                h_max_m)
 
 
