@@ -106,6 +106,9 @@ def tgd_at(extras: NavigationExtras, sv, t_gps_s):
 
 
 class SatellitesAtTransmit(NamedTuple):
+    """Broadcast satellite states at the transmit time of each observation (T epochs, S
+    satellites)."""
+
     t_tx_s: np.ndarray  # (T, S) transmit time, GPS seconds
     ecef_tx_m: np.ndarray  # (T, S, 3) broadcast position at t_tx in the ECEF frame of t_tx
     clock_s: np.ndarray  # (T, S) dt_sv(t_tx): polynomial + relativistic (without T_GD)
@@ -168,6 +171,8 @@ def sagnac_rotate(receiver_ecef_m, sat_tx_ecef_m, n_iter=3):
 
 
 class ReceiverTerms(NamedTuple):
+    """The terms of the pseudorange model that depend on a receiver position estimate."""
+
     sat_ecef_m: jax.Array  # (T, S, 3) rotated into the reception-time frame (Sagnac)
     travel_time_s: jax.Array  # (T, S)
     az_rad: jax.Array  # (T, S)

@@ -153,6 +153,7 @@ class Recording:
     truth: pd.DataFrame | None = None
 
     def table(self, name: str) -> pd.DataFrame | None:
+        """The table ``name`` (one of ``TABLES``), None when absent."""
         return getattr(self, name)
 
 
@@ -452,6 +453,8 @@ def transmitters_enu_m(recording: Recording, tx_ids=None) -> np.ndarray:
 
 
 class TruthENU(NamedTuple):
+    """The truth table in the local ENU frame of meta.json's origin."""
+
     t_s: np.ndarray  # (T,)
     position_enu_m: np.ndarray  # (T, 3)
     velocity_enu_mps: np.ndarray | None  # (T, 3) or None when the truth has no velocity

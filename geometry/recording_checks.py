@@ -47,6 +47,11 @@ class RecordingWarning(UserWarning):
 
 @dataclasses.dataclass(frozen=True)
 class TableSpec:
+    """The columns of one table and the rules the loader checks on them: required and
+    optional columns, text (id) columns, optional groups that go together, the time order of
+    ``t_s`` ("strict", "nondecreasing" or "none"), the unique key, the columns that must be
+    positive, ECEF triples, and the defaults of absent optional columns."""
+
     required: tuple[str, ...]
     optional: tuple[str, ...] = ()
     text: tuple[str, ...] = ()
@@ -98,6 +103,7 @@ class Where:
 
     def err(self, problem: str, fix: str = "", column: str | None = None,
             row: int | None = None) -> RecordingError:
+        """The ``RecordingError`` of ``problem`` at this location (column, row), with ``fix``."""
         parts = [self.label]
         if column is not None:
             parts.append(f"key {column!r}" if self.meta else f"column {column!r}")
@@ -122,6 +128,8 @@ def _suggest(name: str, candidates) -> str:
 # ----------------------------------------------------------------------------- meta
 
 def check_meta(meta: Any, where: Where) -> dict:
+    """meta.json checked (format, version, origin, GPS time, IMU rate, frames, source);
+    returns it as plain JSON. Raises ``RecordingError`` at ``where``."""
     if not isinstance(meta, dict):
         raise where.err(f"meta.json must hold a JSON object, got {type(meta).__name__}",
                         "Write {\"format\": \"oaraim-recording\", \"format_version\": 1, "
@@ -197,6 +205,8 @@ def _first(mask) -> int:
 
 
 def check_table(name: str, df: Any, where: Where) -> pd.DataFrame:
+    """Table ``name`` checked against ``SPECS[name]`` and normalized (float64 numbers, text
+    ids, 0..n-1 index, defaults filled). Raises ``RecordingError`` at ``where``."""
     spec = SPECS[name]
     if not isinstance(df, pd.DataFrame):
         raise where.err(f"the {name} table must be a pandas DataFrame, got "
@@ -347,6 +357,8 @@ def check_table(name: str, df: Any, where: Where) -> pd.DataFrame:
 
 
 def cross_checks(meta, tables, where_of) -> None:
+    """Rules across tables: a ranging table exists, pseudoranges have their transmitters and
+    name known ones, the IMU steps match meta.json's ``imu_rate_hz``."""
     pr, tx = tables.get("pseudoranges"), tables.get("transmitters")
     if pr is None and tables.get("gnss") is None:
         raise where_of("pseudoranges").err(

@@ -60,6 +60,9 @@ class ObservationFileWarning(UserWarning):
 
 
 class Observations(NamedTuple):
+    """What ``read_observations`` returns: L1 code pseudoranges of the GPS satellites over
+    the epochs, with the header facts the replay uses."""
+
     t_gps_s: np.ndarray  # (T,) receiver time tags, GPS seconds
     sv: np.ndarray  # (S,) satellite ids such as 'G05'
     pseudorange_m: np.ndarray  # (T, S) L1 code pseudorange; 0 where not valid
