@@ -24,7 +24,7 @@ surface meteorology). ``saastamoinen_zhd_m`` (Saastamoinen 1972, in the form of 
 
 import jax.numpy as jnp
 
-from oaraim.constants import C_M_S
+from oaraim.constants import C_M_S, STANDARD_GRAVITY_MPS2
 
 SEMICIRCLE_RAD = jnp.pi
 
@@ -138,7 +138,7 @@ MOPS_K1 = 77.604
 MOPS_K2 = 382000.0
 MOPS_RD = 287.054
 MOPS_GM = 9.784
-MOPS_G = 9.80665
+MOPS_G = STANDARD_GRAVITY_MPS2
 
 
 def _mops_met(lat_rad, day_of_year):

@@ -27,8 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-#: standard gravity for the mg <-> m/s^2 conversion of datasheets (BIPM SI brochure, exact)
-G0_M_S2 = 9.80665
+from oaraim.constants import STANDARD_GRAVITY_MPS2
+
+#: standard gravity for the mg <-> m/s^2 conversion of datasheets (``oaraim.constants``)
+G0_M_S2 = STANDARD_GRAVITY_MPS2
 _DEG = np.pi / 180.0
 
 

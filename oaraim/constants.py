@@ -30,6 +30,10 @@ MU_GPS_M3_S2 = 3.986005e14
 #: GM of the Galileo broadcast model, m^3/s^2 (Galileo OS SIS ICD Issue 2.0 Table 59)
 MU_GAL_M3_S2 = WGS84_GM_M3_S2
 
+#: standard gravity g_0, m/s^2 (3rd CGPM 1901; BIPM SI brochure, exact): datasheet mg units and
+#: the surface g of the RTCA MOPS troposphere model (DO-229 A.4.2.4)
+STANDARD_GRAVITY_MPS2 = 9.80665
+
 #: WGS-84 normal gravity at the equator, m/s^2 (NIMA TR8350.2 Table 3.4)
 WGS84_GAMMA_E_MPS2 = 9.7803253359
 #: WGS-84 normal gravity at the poles, m/s^2 (NIMA TR8350.2 Table 3.4)

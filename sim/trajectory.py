@@ -33,6 +33,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from oaraim.constants import STANDARD_GRAVITY_MPS2
 from oaraim.geometry.frames import normal_gravity_mps2
 from oaraim.sim.measurement import ErrorModel
 
@@ -100,7 +101,7 @@ def heading_quaternion(psi_rad):
 
 
 def trajectory(segments, dt_s=0.01, substeps=16, start_enu_m=(0.0, 0.0, 0.0), heading0_rad=0.0,
-               speed0_m_s=0.0, climb0_m_s=0.0, gravity_m_s2=9.80665) -> Trajectory:
+               speed0_m_s=0.0, climb0_m_s=0.0, gravity_m_s2=STANDARD_GRAVITY_MPS2) -> Trajectory:
     """Truth trajectory and ideal IMU samples at ``1 / dt_s`` Hz from motion segments.
 
     Host-side and deterministic (one truth is shared by every Monte Carlo run). The total
