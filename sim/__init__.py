@@ -21,7 +21,9 @@ from oaraim.sim.drive import (
     DriveSetup,
     DriveSummary,
     DriveTrace,
+    InitialDraw,
     drive_setup,
+    initial_draw,
     monte_carlo_drive,
     simulate_drive,
 )
@@ -49,9 +51,10 @@ from oaraim.sim.trajectory import (
 
 __all__ = [
     "SCENARIOS", "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel",
-    "Scenario", "Segment", "Trajectory", "WorldState", "drive", "drive_epoch", "drive_seed000",
-    "drive_seed002", "drive_setup", "epoch_times", "example_recording", "fault_bias_m", "gnss",
-    "measurement", "monte_carlo_drive", "pseudorange_from_range", "pseudorange_sample",
-    "pseudorange_true", "pseudoranges", "recordings", "scenario_geometry", "simulate_drive",
-    "synthesize_recording", "to_recording", "trajectory", "uav_seed004",
+    "InitialDraw", "Scenario", "Segment", "Trajectory", "WorldState", "drive", "drive_epoch",
+    "drive_seed000", "drive_seed002", "drive_setup", "epoch_times", "example_recording",
+    "fault_bias_m", "gnss", "initial_draw", "measurement", "monte_carlo_drive",
+    "pseudorange_from_range", "pseudorange_sample", "pseudorange_true", "pseudoranges",
+    "recordings", "scenario_geometry", "simulate_drive", "synthesize_recording", "to_recording",
+    "trajectory", "uav_seed004",
 ]
