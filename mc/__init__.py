@@ -9,7 +9,7 @@ from oaraim.mc.keys import realization_keys
 from oaraim.mc.reduce import BLOCK, EmpiricalCDF, Histogram, Mean
 from oaraim.mc.runner import ChunkPlan, run_chunked
 from oaraim.mc.store import provenance, read_summary, write_json, write_results
-from oaraim.mc.sweep import Axis, SweepResult, run_sweep
+from oaraim.mc.sweep import Axis, Execution, Storage, SweepResult, run_sweep
 
 # The sweep reducers are mc.sweep.Mean, Max, Min, Histogram, Count (mc.Mean and mc.Histogram are
 # the streaming reducers of mc.reduce).
@@ -19,8 +19,10 @@ __all__ = [
     "Axis",
     "ChunkPlan",
     "EmpiricalCDF",
+    "Execution",
     "Histogram",
     "Mean",
+    "Storage",
     "SweepResult",
     "provenance",
     "read_summary",

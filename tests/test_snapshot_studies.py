@@ -6,7 +6,7 @@ import pytest
 
 from oaraim import geometry
 from oaraim.geometry import gnss_scenario
-from oaraim.studies.registry import STUDIES
+from oaraim.registry import STUDIES
 from oaraim.studies.seed004_uav import synthesize
 
 

@@ -21,6 +21,7 @@ STUDIES = {s.name: s for s in (Fig3Elevation(), Fig4HplCdf(), Fig5Madrid24h(), F
 
 
 def get_study(name):
+    """The registered study called ``name``; ValueError naming the known studies if none is."""
     try:
         return STUDIES[name]
     except KeyError:

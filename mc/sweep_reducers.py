@@ -1,0 +1,288 @@
+"""The reducers of a parameter sweep: per-cell statistics of the kernel outputs.
+
+Each reducer turns the outputs of one chunk into a *partial* (``partial``), folds partials into
+a cell's state (``empty``, ``accumulate``) and finishes the state into dataset variables
+(``finish``). Floating means keep one sum per block of ``mc.reduce.BLOCK`` realizations and
+combine them with ``math.fsum``; counts, extrema and histograms are exact; so a cell's
+statistics do not depend on chunking or on the order chunks finish (``mc.sweep``).
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from oaraim.mc.reduce import BLOCK
+
+
+def _where_mask(out, where, n, ctx):
+    if where is None:
+        return np.ones(n, bool)
+    m = _output(out, where, n, ctx)
+    if m.dtype != bool:
+        raise TypeError(f"kernel output {where!r} is used as a `where` mask and must be boolean, "
+                        f"got dtype {m.dtype} ({ctx})")
+    return m
+
+
+def _output(out, name, n, ctx):
+    """The first n values of kernel output ``name`` (1-D, at least n long), as NumPy."""
+    if name not in out:
+        raise KeyError(f"the kernel returned no output {name!r} ({ctx}); it returned: "
+                       + ", ".join(sorted(out)))
+    v = np.asarray(out[name])
+    if v.ndim != 1 or v.shape[0] < n:
+        raise ValueError(f"kernel output {name!r} must have shape (chunk,), got {v.shape} ({ctx})")
+    return v[:n]
+
+
+def _check_no_nan(name, v, include, ctx):
+    if v.dtype.kind == "f" and np.isnan(v[include]).any():
+        raise FloatingPointError(
+            f"kernel output {name!r} is NaN for an included realization ({ctx}); NaN is a bug "
+            "upstream: return inf with a status code for an unavailable result (DESIGN.md)")
+
+
+@dataclass(frozen=True)
+class Mean:
+    """Mean of output ``name`` over the included realizations with a finite value.
+
+    Dataset variables ``{name}_mean`` (float64; NaN only when the count is 0) and ``{name}_count``
+    (int64, the realizations that entered the mean). ``where`` names a boolean output: only
+    realizations where it is True are included. NaN in an included realization raises.
+    """
+
+    name: str
+    where: str | None = None
+
+    def inputs(self):
+        """The kernel outputs this reducer reads."""
+        return (self.name,) + ((self.where,) if self.where else ())
+
+    def variables(self):
+        """The dataset variables it produces: {name: extra dimensions}."""
+        return {f"{self.name}_mean": (), f"{self.name}_count": ()}
+
+    def partial(self, out, valid, nblocks, ctx):
+        """Partial statistics of one chunk (``valid``: the realizations inside the run)."""
+        n = valid.size
+        v = _output(out, self.name, n, ctx).astype(np.float64)
+        inc = valid & _where_mask(out, self.where, n, ctx)
+        _check_no_nan(self.name, v, inc, ctx)
+        keep = inc & np.isfinite(v)
+        x = np.where(keep, v, 0.0).reshape(nblocks, BLOCK)
+        # one NumPy sum per zero-padded block: the same numbers in the same layout whatever the
+        # chunk, so the same bits
+        return {"sum": np.array([np.sum(row) for row in x]),
+                "count": keep.reshape(nblocks, BLOCK).sum(axis=1).astype(np.int64)}
+
+    def empty(self, n_blocks):
+        """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
+        return {"sum": np.zeros(n_blocks), "count": np.zeros(n_blocks, np.int64)}
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        nb = part["sum"].size
+        state["sum"][b0:b0 + nb] = part["sum"]
+        state["count"][b0:b0 + nb] = part["count"]
+
+    def finish(self, state):
+        """The dataset variables of one cell from its state."""
+        n = int(state["count"].sum())
+        mean = math.fsum(state["sum"].tolist()) / n if n else float("nan")
+        return {f"{self.name}_mean": np.float64(mean), f"{self.name}_count": np.int64(n)}
+
+
+@dataclass(frozen=True)
+class Max:
+    """Largest value of output ``name`` over the included realizations (``{name}_max``, float64;
+    -inf when nothing is included; +inf values count). NaN in an included realization raises."""
+
+    name: str
+    where: str | None = None
+    _sign = 1.0
+
+    def inputs(self):
+        """The kernel outputs this reducer reads."""
+        return (self.name,) + ((self.where,) if self.where else ())
+
+    def _var(self):
+        return f"{self.name}_{'max' if self._sign > 0 else 'min'}"
+
+    def variables(self):
+        """The dataset variables it produces: {name: extra dimensions}."""
+        return {self._var(): ()}
+
+    def partial(self, out, valid, nblocks, ctx):
+        """Partial statistics of one chunk (``valid``: the realizations inside the run)."""
+        n = valid.size
+        v = _output(out, self.name, n, ctx).astype(np.float64)
+        inc = valid & _where_mask(out, self.where, n, ctx)
+        _check_no_nan(self.name, v, inc, ctx)
+        s = self._sign
+        ext = s * np.max(s * v[inc]) if inc.any() else -s * np.inf
+        return {"value": np.array([ext], np.float64)}
+
+    def empty(self, n_blocks):
+        """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
+        return {"value": np.array([-self._sign * np.inf])}
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        pick = np.maximum if self._sign > 0 else np.minimum
+        state["value"] = pick(state["value"], part["value"])
+
+    def finish(self, state):
+        """The dataset variables of one cell from its state."""
+        return {self._var(): np.float64(state["value"][0])}
+
+
+@dataclass(frozen=True)
+class Min(Max):
+    """Smallest value of output ``name`` over the included realizations (``{name}_min``, float64;
+    +inf when nothing is included). NaN in an included realization raises."""
+
+    _sign = -1.0
+
+
+@dataclass(frozen=True)
+class Histogram:
+    """Counts of output ``name`` in the bins ``edges`` (NumPy's convention: the last bin is
+    closed). ``{name}_hist`` (int64, extra dimension ``{name}_bin`` with coordinates
+    ``{name}_bin_lo``/``{name}_bin_hi``) and ``{name}_outside`` (included realizations outside
+    the edges or infinite). NaN in an included realization raises."""
+
+    name: str
+    edges: tuple
+    where: str | None = None
+
+    def __post_init__(self):
+        e = tuple(float(x) for x in np.asarray(self.edges, float).ravel())
+        if len(e) < 2 or not all(np.isfinite(e)) or np.any(np.diff(e) <= 0):
+            raise ValueError(f"Histogram({self.name!r}): edges must be at least two finite, "
+                             f"strictly increasing numbers, got {self.edges!r}")
+        object.__setattr__(self, "edges", e)
+
+    def inputs(self):
+        """The kernel outputs this reducer reads."""
+        return (self.name,) + ((self.where,) if self.where else ())
+
+    def variables(self):
+        """The dataset variables it produces: {name: extra dimensions}."""
+        return {f"{self.name}_hist": (f"{self.name}_bin",), f"{self.name}_outside": ()}
+
+    def coords(self):
+        """Extra dataset coordinates: the bin edges."""
+        e = np.asarray(self.edges)
+        return {f"{self.name}_bin_lo": (f"{self.name}_bin", e[:-1]),
+                f"{self.name}_bin_hi": (f"{self.name}_bin", e[1:])}
+
+    def partial(self, out, valid, nblocks, ctx):
+        """Partial statistics of one chunk (``valid``: the realizations inside the run)."""
+        n = valid.size
+        v = _output(out, self.name, n, ctx).astype(np.float64)
+        inc = valid & _where_mask(out, self.where, n, ctx)
+        _check_no_nan(self.name, v, inc, ctx)
+        x = v[inc]
+        counts, _ = np.histogram(x[np.isfinite(x)], np.asarray(self.edges))
+        return {"counts": counts.astype(np.int64),
+                "outside": np.array([x.size - int(counts.sum())], np.int64)}
+
+    def empty(self, n_blocks):
+        """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
+        return {"counts": np.zeros(len(self.edges) - 1, np.int64),
+                "outside": np.zeros(1, np.int64)}
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        state["counts"] += part["counts"]
+        state["outside"] += part["outside"]
+
+    def finish(self, state):
+        """The dataset variables of one cell from its state."""
+        return {f"{self.name}_hist": state["counts"].copy(),
+                f"{self.name}_outside": np.int64(state["outside"][0])}
+
+
+@dataclass(frozen=True)
+class Count:
+    """Number of realizations where the boolean output ``name`` is True (``{name}_count``,
+    int64); with ``where``, only among the realizations where that output is True."""
+
+    name: str
+    where: str | None = None
+
+    def inputs(self):
+        """The kernel outputs this reducer reads."""
+        return (self.name,) + ((self.where,) if self.where else ())
+
+    def variables(self):
+        """The dataset variables it produces: {name: extra dimensions}."""
+        return {f"{self.name}_count": ()}
+
+    def partial(self, out, valid, nblocks, ctx):
+        """Partial statistics of one chunk (``valid``: the realizations inside the run)."""
+        n = valid.size
+        v = _output(out, self.name, n, ctx)
+        if v.dtype != bool:
+            raise TypeError(f"Count({self.name!r}) needs a boolean kernel output, got dtype "
+                            f"{v.dtype} ({ctx})")
+        inc = valid & _where_mask(out, self.where, n, ctx)
+        return {"count": np.array([np.count_nonzero(v & inc)], np.int64)}
+
+    def empty(self, n_blocks):
+        """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
+        return {"count": np.zeros(1, np.int64)}
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        state["count"] += part["count"]
+
+    def finish(self, state):
+        """The dataset variables of one cell from its state."""
+        return {f"{self.name}_count": np.int64(state["count"][0])}
+
+
+@dataclass(frozen=True)
+class Values:
+    """Every realization's value of output ``name``, kept (not reduced): ``{name}`` with the
+    extra dimension ``dim`` of length ``n`` (the sweep's realizations). For deterministic grids
+    whose realizations are not samples but elements (e.g. longitude x epoch of an availability
+    map, ``index_kernel``). Stored with ``dtype``; realizations past ``n`` are not kept. NaN in
+    a float output raises (a bug upstream, DESIGN.md); infinities are data."""
+
+    name: str
+    n: int
+    dtype: str = "float64"
+    dim: str = "realization"
+
+    def inputs(self):
+        """The kernel outputs this reducer reads."""
+        return (self.name,)
+
+    def variables(self):
+        """The dataset variables it produces: {name: extra dimensions}."""
+        return {self.name: (self.dim,)}
+
+    def partial(self, out, valid, nblocks, ctx):
+        """Partial statistics of one chunk (``valid``: the realizations inside the run)."""
+        v = _output(out, self.name, valid.size, ctx)
+        if np.issubdtype(v.dtype, np.floating):
+            _check_no_nan(self.name, v, valid, ctx)
+        return {"values": np.where(valid, v, np.zeros((), v.dtype)).astype(self.dtype)}
+
+    def empty(self, n_blocks):
+        """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
+        return {"values": np.zeros(n_blocks * BLOCK, self.dtype)}
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        v = part["values"]
+        state["values"][b0 * BLOCK:b0 * BLOCK + v.size] = v
+
+    def finish(self, state):
+        """The dataset variables of one cell from its state."""
+        return {self.name: state["values"][:self.n].copy()}
+
+
+REDUCERS = (Mean, Max, Min, Histogram, Count, Values)
