@@ -54,7 +54,7 @@ from oaraim.config import default_threads
 from oaraim.mc.grid import Axis, canonical, cell_key_id
 from oaraim.mc.grid import cells as grid_cells
 from oaraim.mc.keys import MAX_REALIZATIONS
-from oaraim.mc.reduce import BLOCK
+from oaraim.mc.reduce import BLOCK, REDUCERS, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import DEFAULT_CHUNK
 from oaraim.mc.sweep_backends import (
     check_scheduler,
@@ -63,7 +63,6 @@ from oaraim.mc.sweep_backends import (
     run_dask,
     run_threads,
 )
-from oaraim.mc.sweep_reducers import REDUCERS, Count, Histogram, Max, Mean, Min, Values
 from oaraim.mc.sweep_store import (
     CHUNK_DIR,
     CHUNK_RE,
@@ -78,9 +77,9 @@ from oaraim.mc.sweep_store import (
 from oaraim.mc.sweep_store import normalized as _normalized
 
 __all__ = [
-    "CHUNK_DIR", "MANIFEST", "REDUCERS", "Axis", "Count", "Execution", "Histogram", "Max", "Mean",
-    "Min", "Storage", "SweepResult", "Values", "canonical", "cell_key_id", "check_scheduler",
-    "compute_chunk", "kernel_outputs", "run_sweep",
+    "CHUNK_DIR", "MANIFEST", "REDUCERS", "Axis", "Count", "EmpiricalCDF", "Execution", "Histogram",
+    "Max", "Mean", "Min", "Storage", "SweepResult", "Values", "canonical", "cell_key_id",
+    "check_scheduler", "compute_chunk", "kernel_outputs", "run_sweep",
 ]
 
 
@@ -162,11 +161,12 @@ def _check_args(axes, realizations, reducers, key_axes, workers, scheduler):
         raise ValueError(f"realizations must be an integer in [1, 2^32], got {realizations!r}")
     if not reducers:
         raise ValueError("a sweep needs at least one reducer (mc.sweep.Mean, Max, Min, "
-                         "Histogram, Count)")
+                         "Histogram, EmpiricalCDF, Count, Values)")
     seen = {}
     for r in reducers:
         if not isinstance(r, REDUCERS):
-            raise TypeError(f"reducers must be mc.sweep.Mean/Max/Min/Histogram/Count, got {r!r}")
+            raise TypeError(f"reducers must be mc.sweep.Mean/Max/Min/Histogram/EmpiricalCDF/Count/"
+                            f"Values, got {r!r}")
         for var in r.variables():
             if var in seen or var in names:
                 other = seen.get(var, "an axis")
@@ -232,8 +232,8 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
         arrays. Built once per cell and process.
       axes: ``Axis`` objects, in grid order.
       realizations: draws per cell.
-      reducers: ``Mean``, ``Max``, ``Min``, ``Histogram``, ``Count``, ``Values`` of kernel
-        outputs.
+      reducers: ``Mean``, ``Max``, ``Min``, ``Histogram``, ``EmpiricalCDF``, ``Count``,
+        ``Values`` of kernel outputs (``mc.reduce``).
       seed: study seed.
       storage: a ``Storage``: the output folder, the run's fingerprint, resume or not.
       key_axes: axes whose values change the draws; the others reuse them.

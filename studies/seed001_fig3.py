@@ -69,7 +69,8 @@ class Fig3Elevation(Study):
     def run(self, params, realizations, seed, progress):
         grid_deg = self.el_grid_deg(params)
         step = params["el_step_deg"]
-        hist = Histogram(np.concatenate([grid_deg - step / 2, [grid_deg[-1] + step / 2]]))
+        hist = Histogram("el_star_deg",
+                         np.concatenate([grid_deg - step / 2, [grid_deg[-1] + step / 2]]))
         kernel = functools.partial(
             fig3_kernel, n_gps=params["n_gps"], mask_rad=np.deg2rad(params["mask_deg"]),
             el_grid_rad=jnp.asarray(np.deg2rad(grid_deg)), sigma_gps_m=params["sigma_gps_m"],

@@ -117,8 +117,8 @@ class Fig4HplCdf(Study):
         dof = params["n_gps"] + params["n_added"] - 4
         lam = lambda_det_table(params["p_fa"], params["p_md"], dof)[dof]
         scale = float(np.sqrt(lam))
-        cdf = {k: EmpiricalCDF(HPL_GRID_M) for k in ("gnss", "sop")}
-        means = {k: Mean() for k in ("gnss", "sop", "reduction")}
+        cdf = {k: EmpiricalCDF(f"hpl_{k}_m", HPL_GRID_M) for k in ("gnss", "sop")}
+        means = {k: Mean(f"hpl_{k}_m") for k in ("gnss", "sop", "reduction")}
         kernel = functools.partial(
             fig4_kernel, n_gps=params["n_gps"], n_added=params["n_added"],
             mask_rad=np.deg2rad(params["mask_deg"]), sigma_gps_m=params["sigma_gps_m"],
