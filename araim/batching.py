@@ -20,12 +20,13 @@ dropped, so changing ``CHUNK`` moves results only by rounding (last bits), never
 import concurrent.futures
 import functools
 import math
-import os
 import threading
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from oaraim.config import default_threads
 
 #: XLA options of every jit that holds the MHSS kernel (``jit_kernel``): prefer 512-bit vectors.
 #: XLA:CPU prefers 256-bit vectors by default, also on AVX-512 processors; this project's
@@ -153,22 +154,6 @@ def map_chunks(fn, arrays, batch_shape, chunk=CHUNK):
     out = jax.lax.map(lambda xs: fn(*xs), stacked)
     out = jax.tree.map(lambda y: y.reshape((n_chunks * chunk,) + y.shape[2:]), out)
     return _unflatten(out, batch_shape, n)
-
-
-def default_threads():
-    """Host threads over which ``map_threads`` splits a large batch: ``OARAIM_THREADS``, else
-    2, the cores of this project's machines. XLA runs one chunked MHSS program on ~1.6 cores
-    and two programs side by side on ~2, and the pair gives 1.9x the PL/s of one (measured on
-    2 cores, 9 GPS + 4 SOPs, batch 65,536: 166-180k PL/s in one call, 309-336k PL/s in two
-    threads; four threads 302k, eight 248k). ``OARAIM_THREADS=1`` turns the split off."""
-    v = os.environ.get("OARAIM_THREADS", "2")
-    try:
-        n = int(v)
-    except ValueError:
-        raise ValueError(f"OARAIM_THREADS must be a positive integer, got {v!r}") from None
-    if n < 1:
-        raise ValueError(f"OARAIM_THREADS must be a positive integer, got {v!r}")
-    return n
 
 
 def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK, part_fn=None):

@@ -6,23 +6,28 @@ if __name__ != "oaraim.mc":  # the source folder is importable from the checkout
                       "oaraim.mc (pip install -e .), which also enables JAX's float64 mode")
 
 from oaraim.mc.keys import STREAMS, realization_keys, stream
-from oaraim.mc.reduce import BLOCK, EmpiricalCDF, Histogram, Mean
+from oaraim.mc.reduce import BLOCK, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import ChunkPlan, run_chunked
 from oaraim.mc.store import provenance, read_summary, write_json, write_results
-from oaraim.mc.sweep import Axis, SweepResult, run_sweep
+from oaraim.mc.sweep import Axis, Execution, Storage, SweepResult, run_sweep
 
-# The sweep reducers are mc.sweep.Mean, Max, Min, Histogram, Count (mc.Mean and mc.Histogram are
-# the streaming reducers of mc.reduce).
+# One reducer family (mc.reduce) serves sweeps (mc.sweep re-exports it) and streamed chunks.
 
 __all__ = [
     "BLOCK",
     "STREAMS",
     "Axis",
     "ChunkPlan",
+    "Count",
     "EmpiricalCDF",
+    "Execution",
     "Histogram",
+    "Max",
     "Mean",
+    "Min",
+    "Storage",
     "SweepResult",
+    "Values",
     "provenance",
     "read_summary",
     "realization_keys",

@@ -2,8 +2,10 @@
 
 The subpackages are ``oaraim.geometry`` (where transmitters are), ``oaraim.araim`` (what a
 receiver computes), ``oaraim.mc`` (how many epochs are run), ``oaraim.studies`` (the papers'
-figures, the CLI) and ``oaraim.data`` (the real GNSS files). The source tree keeps them as the
-top-level folders ``geometry/ araim/ mc/ studies/``; ``pyproject.toml`` installs them here.
+figures) and ``oaraim.data`` (the real GNSS files); the app layer above the studies is
+``oaraim.cli``, ``oaraim.execute``, ``oaraim.registry``, ``oaraim.report`` and
+``oaraim.bench``. The source tree keeps the subpackages as the top-level folders
+``geometry/ araim/ mc/ studies/``; ``pyproject.toml`` installs them here.
 
 float64 is the toolkit's convention (integrity probabilities reach 1e-9, normal matrices are
 ill-conditioned near the edge of availability), so importing any part of oaraim enables JAX's

@@ -1,5 +1,6 @@
 """What every study declares: parameters with validation, a run, and a plot that reads results."""
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -128,6 +129,7 @@ def axis(parse_one):
 
 @dataclass
 class StudyResult:
+    """What a study's run returns: its dataset, summary rows, metrics and extra provenance."""
     dataset: Any  # xarray.Dataset
     rows: list  # [{"quantity", "unit", "published", "reproduced", "note"}]
     metrics: dict
@@ -202,7 +204,7 @@ class SweepStudy(Study):
     (the others reuse them: common random numbers). They implement ``kernel`` (``coords ->
     keys -> dict of (batch,) arrays``; the engine calls it with ``batch_size(params)`` keys,
     1024 by default, whatever the chunk), ``reducers`` and ``finish`` (the reduced grid ->
-    ``StudyResult``). ``studies.execute.run_study`` runs them through ``mc.sweep.run_sweep``.
+    ``StudyResult``). ``oaraim.execute.run_study`` runs them through ``mc.sweep.run_sweep``.
     """
 
     axis_names: tuple = ()
@@ -243,10 +245,8 @@ class SweepStudy(Study):
     def run(self, params, realizations, seed, progress=None) -> StudyResult:
         """Convenience for tests and notebooks: the whole sweep in this process, its chunk files
         in a temporary folder that is deleted afterwards (``progress`` is ignored). The command
-        line goes through ``studies.execute.run_study`` instead (resume, Dask, output folder)."""
+        line goes through ``oaraim.execute.run_study`` instead (resume, Dask, output folder)."""
         import tempfile
-
-        from oaraim.studies.execute import run_sweep_study
 
         fixed = self.fixed_realizations(params)
         if fixed is not None and realizations != fixed:
@@ -256,6 +256,45 @@ class SweepStudy(Study):
             result, _ = run_sweep_study(self, params, realizations, seed, tmp, progress=False)
         return result
 
+
+def study_kernel(study, params, coords):
+    """Kernel factory of a sweep study object: ``study.kernel(params, coords)`` (picklable as
+    ``functools.partial(study_kernel, study, params)`` when the study is)."""
+    return study.kernel(params, coords)
+
+
+def sweep_fingerprint(study, params, realizations, seed):
+    """What determines a sweep's results (stored in OUT/STUDY/sweep.json; a resume must match).
+    The chunk size is left out: results do not depend on it and a resume may change it."""
+    return {"study": study.name,
+            "params": {k: v for k, v in params.items() if k != study.chunk_param},
+            "seed": int(seed), "realizations": int(realizations)}
+
+
+def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False, execution=None,
+                    progress=True, kernel_factory=None):
+    """Run a ``SweepStudy`` through ``mc.sweep.run_sweep`` into ``out_dir`` (its chunks and
+    sweep.json); returns (StudyResult from ``study.finish``, SweepResult).
+
+    ``execution`` (an ``mc.sweep.Execution``: threads, Dask workers or scheduler) defaults to
+    in-process; the chunk size is the study's (``chunk_size(params)``) unless ``execution``
+    sets one. ``kernel_factory`` (``coords -> kernel``) defaults to the study object's own
+    kernel; ``oaraim.execute`` passes one that Dask workers look up by study name.
+    """
+    from oaraim.mc.sweep import Execution, Storage, run_sweep
+
+    execution = Execution() if execution is None else execution
+    if execution.chunk_size is None:
+        execution = execution._replace(chunk_size=study.chunk_size(params))
+    if kernel_factory is None:
+        kernel_factory = functools.partial(study_kernel, study, params)
+    storage = Storage(out_dir, sweep_fingerprint(study, params, realizations, seed),
+                      resume=resume)
+    sweep = run_sweep(kernel_factory, study.axes(params), realizations, study.reducers(params),
+                      seed=seed, key_axes=study.key_axes, storage=storage, execution=execution,
+                      batch_size=study.batch_size(params), progress=progress,
+                      description=study.name)
+    return study.finish(params, sweep.dataset, realizations, seed), sweep
 
 
 def fault_modes_param(default, why):

@@ -4,7 +4,7 @@ Seed 004's MHSS protection levels promise that, for every monitored fault mode a
 magnitude, the probability of hazardous misleading information (HMI: an error beyond the PL
 with no alert) stays within the integrity budget (eqs. 14-16, Table I). This study measures it.
 One geometry is the Orange County receiver of seed 004 section VI at a GPS epoch uniform over
-the day (``seed004_common``) with, in the cells that have SOPs, towers drawn by the BPP; the
+the day (``studies.common.seed004``) with, in the cells that have SOPs, towers drawn by the BPP; the
 same epochs in every cell (common random numbers), so "with" and "without SOPs" differ by the
 towers only. For each geometry ``araim.integrity_risk`` injects every scenario (fault-free, a
 bias on each satellite and tower, a constellation-wide fault, two simultaneous biases) at the
@@ -34,7 +34,6 @@ from oaraim import geometry, mc
 from oaraim.araim import integrity_risk as ir
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.mc.sweep import Values
-from oaraim.studies import seed004_common as c
 from oaraim.studies.base import (
     Param,
     StudyResult,
@@ -46,6 +45,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
+from oaraim.studies.common import seed004 as c
 
 #: seed 004 section VII (UAV experiment): sigma_URA^S and P_s^S
 SIGMA_URA_SOP_M = 3.0

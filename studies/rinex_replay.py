@@ -54,11 +54,11 @@ from oaraim.studies.base import (
     fault_modes_param,
     in_range,
     keyword_or_file,
-    non_negative,
     parse_choice,
     positive,
     probability,
 )
+from oaraim.studies.common.seed004 import B_NOM_GPS, P_CONST_GPS_PARAM, P_SAT_GPS
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"
@@ -314,9 +314,9 @@ class RinexReplay(Study):
         "p_md": Param(snapshot.DEFAULT_P_MD, probability,
                       "slope RAIM missed-detection probability"),
         "sigma_ura_m": Param(1.0, positive, "GPS sigma_URA (seed 004 Table I)", "m"),
-        "b_nom_m": Param(0.75, non_negative, "GPS nominal bias (seed 004 Table I)", "m"),
-        "p_sat": Param(1e-5, probability, "GPS P_s (seed 004 Table I)"),
-        "p_const": Param(1e-8, probability, "GPS P_const (seed 004 Table I)"),
+        "b_nom_m": B_NOM_GPS,
+        "p_sat": P_SAT_GPS,
+        "p_const": P_CONST_GPS_PARAM,
         "iono": Param("klobuchar", parse_choice("klobuchar", "none"), "ionospheric correction"),
         "tropo": Param("mops", parse_choice("mops", "none"),
                        "tropospheric correction (RTCA DO-229 A.4.2.4)"),

@@ -19,6 +19,7 @@ from oaraim import geometry
 from oaraim.araim.added_source import added_source_slope_max
 from oaraim.mc import Histogram, run_chunked
 from oaraim.studies.base import Param, Study, StudyResult, count, in_range, positive
+from oaraim.studies.common import params as shared
 
 
 def draw(key, n_gps, mask_rad):
@@ -53,7 +54,7 @@ class Fig3Elevation(Study):
     quick_realizations = 200_000
     params = {
         "n_gps": Param(5, count(4, 30), "GPS satellites M (seed 001 Fig. 3: 5)"),
-        "mask_deg": Param(15.0, in_range(0.0, 89.0), "elevation mask (seed 001: 15 deg)", "deg"),
+        "mask_deg": shared.MASK_SEED001_DEG,
         "el_step_deg": Param(0.5, in_range(0.01, 15.0),
                              "elevation sweep resolution (DESIGN.md: 0.5 deg)", "deg"),
         "sigma_gps_m": Param(1.0, positive, "GPS pseudorange sigma (cancels if equal)", "m"),
@@ -68,7 +69,8 @@ class Fig3Elevation(Study):
     def run(self, params, realizations, seed, progress):
         grid_deg = self.el_grid_deg(params)
         step = params["el_step_deg"]
-        hist = Histogram(np.concatenate([grid_deg - step / 2, [grid_deg[-1] + step / 2]]))
+        hist = Histogram("el_star_deg",
+                         np.concatenate([grid_deg - step / 2, [grid_deg[-1] + step / 2]]))
         kernel = functools.partial(
             fig3_kernel, n_gps=params["n_gps"], mask_rad=np.deg2rad(params["mask_deg"]),
             el_grid_rad=jnp.asarray(np.deg2rad(grid_deg)), sigma_gps_m=params["sigma_gps_m"],

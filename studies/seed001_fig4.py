@@ -32,11 +32,11 @@ from oaraim.studies.base import (
     StudyResult,
     check_bpp_annulus,
     count,
-    in_range,
     non_negative,
     positive,
     probability,
 )
+from oaraim.studies.common import params as shared
 
 HPL_GRID_M = np.round(np.arange(0.0, 500.0 + 1e-9, 0.01), 2)
 
@@ -97,14 +97,14 @@ class Fig4HplCdf(Study):
     params = {
         "n_gps": Param(5, count(4, 30), "pre-deployed GPS satellites M (seed 001 Fig. 4: 5)"),
         "n_added": Param(4, count(1, 30), "added GNSS satellites or SOPs N (seed 001: 4)"),
-        "mask_deg": Param(15.0, in_range(0.0, 89.0), "elevation mask (seed 001: 15 deg)", "deg"),
+        "mask_deg": shared.MASK_SEED001_DEG,
         "sigma_gps_m": Param(1.0, positive, "GNSS pseudorange sigma (seed silent)", "m"),
-        "sigma_sop_m": Param(1.0, positive, "SOP pseudorange sigma (seed silent)", "m"),
+        "sigma_sop_m": shared.SIGMA_SOP_M,
         "p_fa": Param(1e-5, probability, "false-alarm probability (seed silent)"),
-        "p_md": Param(1e-3, probability, "missed-detection probability (seed silent)"),
+        "p_md": shared.P_MD_SILENT,
         "hal_m": Param(30.0, positive, "horizontal alert limit (seed 001 Fig. 4: 30 m)", "m"),
-        "d_min_m": Param(5.0, non_negative, "BPP inner radius (seed 001: ~5 m)", "m"),
-        "d_max_m": Param(3000.0, positive, "BPP outer radius (seed 001: ~3 km)", "m"),
+        "d_min_m": shared.BPP_D_MIN_SEED001_M,
+        "d_max_m": shared.BPP_D_MAX_SEED001_M,
         "h_min_m": Param(0.0, non_negative, "tower height min (Fig. 4: 0 deg elevation)", "m"),
         "h_max_m": Param(0.0, non_negative, "tower height max (Fig. 4: 0 deg elevation)", "m"),
         "chunk": Param(65536, count(1024), "realizations per kernel call (memory bound)"),
@@ -117,8 +117,8 @@ class Fig4HplCdf(Study):
         dof = params["n_gps"] + params["n_added"] - 4
         lam = lambda_det_table(params["p_fa"], params["p_md"], dof)[dof]
         scale = float(np.sqrt(lam))
-        cdf = {k: EmpiricalCDF(HPL_GRID_M) for k in ("gnss", "sop")}
-        means = {k: Mean() for k in ("gnss", "sop", "reduction")}
+        cdf = {k: EmpiricalCDF(f"hpl_{k}_m", HPL_GRID_M) for k in ("gnss", "sop")}
+        means = {k: Mean(f"hpl_{k}_m") for k in ("gnss", "sop", "reduction")}
         kernel = functools.partial(
             fig4_kernel, n_gps=params["n_gps"], n_added=params["n_added"],
             mask_rad=np.deg2rad(params["mask_deg"]), sigma_gps_m=params["sigma_gps_m"],

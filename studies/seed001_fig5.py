@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import data, geometry
+from oaraim import geometry
 from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.slopes import _slope_hpl_jit
 from oaraim.geometry import gpstime
@@ -41,11 +41,12 @@ from oaraim.studies.base import (
     check_bpp_annulus,
     count,
     in_range,
-    keyword_or_file,
     non_negative,
     positive,
     probability,
 )
+from oaraim.studies.common import params as shared
+from oaraim.studies.common.sky import file_day_start, parse_nav, resolve_sky
 
 MDSCC_ECEF_M = (4849210.0, -360329.7, 4114920.0)  # DESIGN.md: seed 001 with y corrected
 VILL_FILE = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"
@@ -79,10 +80,6 @@ def parse_receiver(name, v):
     return (lat, lon, h)
 
 
-#: 'auto' (the study's default real file), 'nominal' (built-in constellation), or a path
-parse_nav = keyword_or_file(("auto", "nominal"), "RINEX navigation file")
-
-
 def parse_date(name, v):
     v = str(v).strip()
     if v == "auto":
@@ -93,30 +90,6 @@ def parse_date(name, v):
     except ValueError:
         raise ValueError(f"{name} must be 'auto' or YYYY-MM-DD, got {v!r}") from None
     return f"{y:04d}-{m:02d}-{d:02d}"
-
-
-def resolve_sky(nav, default_file=VILL_FILE):
-    """(source, description, is_real_file). ``nav`` is 'auto' (registry file ``default_file``
-    through ``oaraim.data.path``: the data folder, else fetched into the cache; unavailable ->
-    ``DataUnavailable``, one line with the fix), 'nominal' (the built-in constellation, only
-    when asked for), or a file path. There is no silent fallback to the nominal sky."""
-    if nav == "nominal":
-        return "nominal-gps", "nominal GPS 24-slot (SPS PS 2008), requested", False
-    if nav == "auto":
-        try:
-            nav = str(data.path(default_file))
-        except data.DataUnavailable as e:
-            raise data.DataUnavailable(f"{e}; or run with --set nav=nominal (the built-in "
-                                       "24-slot GPS constellation) or --set nav=PATH") from None
-    return nav, f"broadcast ephemeris {Path(nav).name}", True
-
-
-def file_day_start(ephemeris):
-    """00:00 GPS time of the day holding most of the file's records."""
-    toe = ephemeris._toe_healthy[np.isfinite(ephemeris._toe_healthy)]
-    days = np.floor(toe / gpstime.SECONDS_PER_DAY).astype(np.int64)
-    vals, counts = np.unique(days, return_counts=True)
-    return float(vals[np.argmax(counts)] * gpstime.SECONDS_PER_DAY)
 
 
 def compact(az, el, valid, n_slots):
@@ -207,12 +180,12 @@ class Fig5Madrid24h(Study):
                           "GPS elevation mask (seed 001 4.1 silent; Figs. 3-4: 15 deg)", "deg"),
         "n_sops": Param(5, count(1, 16), "SOP towers (seed 001 4.1: 5)"),
         "sigma_gps_m": Param(1.0, positive, "GPS pseudorange sigma (seed silent)", "m"),
-        "sigma_sop_m": Param(1.0, positive, "SOP pseudorange sigma (seed silent)", "m"),
+        "sigma_sop_m": shared.SIGMA_SOP_M,
         "p_fa": Param(1e-5, probability, "false-alarm probability (seed silent; as Fig. 4)"),
         "p_md": Param(1e-3, probability, "missed-detection probability (seed silent; as Fig. 4)"),
         "hpl_threshold_m": Param(40.0, positive, "episode threshold (seed 001: 40 m)", "m"),
-        "d_min_m": Param(5.0, non_negative, "BPP inner radius (seed 001: ~5 m)", "m"),
-        "d_max_m": Param(3000.0, positive, "BPP outer radius (seed 001: ~3 km)", "m"),
+        "d_min_m": shared.BPP_D_MIN_SEED001_M,
+        "d_max_m": shared.BPP_D_MAX_SEED001_M,
         "h_min_m": Param(0.0, non_negative, "tower height min (0 deg elevation)", "m"),
         "h_max_m": Param(0.0, non_negative, "tower height max (0 deg elevation)", "m"),
         "chunk": Param(131072, count(1024), "HPLs (epochs x draws) per kernel call (memory)"),
@@ -223,7 +196,7 @@ class Fig5Madrid24h(Study):
 
     def sky(self, params):
         """GPS sky of the run: (t_gps_s, az, el, valid, sky description, real file?)."""
-        source, desc, real = resolve_sky(params["nav"])
+        source, desc, real = resolve_sky(params["nav"], VILL_FILE)
         if params["date"] != "auto":
             t0 = float(gpstime.gps_seconds(*(int(x) for x in params["date"].split("-"))))
         elif real:

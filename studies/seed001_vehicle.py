@@ -45,7 +45,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
+from oaraim.studies.common.seed004 import NAV, NAV_FILE, resolve_sky
 
 PUBLISHED_HPL_GPS_M = 15.01
 PUBLISHED_HPL_SOP_M = 8.29
@@ -76,9 +76,7 @@ class Seed001Vehicle(Study):
         "duration_s": Param(0.0, in_range(0.0, 1e4), "replay the first duration_s of the drive "
                             "(0: all of it)", "s"),
         "rate_hz": Param(10.0, in_range(0.1, 100.0), "epoch rate (scenario: 10 Hz)", "Hz"),
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
-                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
-                     "navigation file"),
+        "nav": NAV,
         "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the start, hours of the file's "
                          "day (our choice: 10:00 local)", "h"),
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 001: ~15 deg)",
@@ -111,8 +109,8 @@ class Seed001Vehicle(Study):
         t = np.arange(n_t) / params["rate_hz"]
         source, desc, real = resolve_sky(params["nav"])
         if real:
-            from oaraim.studies.seed004_common import _day_start
-            day = _day_start(source, True)
+            from oaraim.studies.common.seed004 import day_start
+            day = day_start(source, True)
         else:
             day = float(gpstime.gps_seconds(2022, 1, 1))
         geom = sim.scenario_geometry(scen, t, day + 3600.0 * params["start_h"], source, desc,

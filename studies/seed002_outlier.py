@@ -1,6 +1,6 @@
 """Seed 002 (ICCPS 2019 WiP): pseudorange outlier detection and exclusion, the 1.4 km drive.
 
-The same EKF-RAIM as seed 000 (``studies.seed000_ekf_raim``: one drive synthesized, written in
+The same EKF-RAIM as seed 000 (``studies.common.ekf_drive``: one drive synthesized, written in
 the recorded-drive format, loaded and replayed for the figures; ``--set recording=PATH`` replays
 a user's drive; a Monte Carlo of ``--realizations`` runs), on ``sim.drive_seed002()``: the
 1.4 km downtown Riverside drive, 5 LTE towers (the seed's "5 LTE base stations"), NIS with
@@ -11,7 +11,7 @@ maximum 2D error 20.4 -> 11.6 m (43.3 %).
 """
 
 from oaraim import sim
-from oaraim.studies.seed000_ekf_raim import EkfDriveStudy
+from oaraim.studies.common.ekf_drive import EkfDriveStudy
 
 
 class Seed002Outlier(EkfDriveStudy):

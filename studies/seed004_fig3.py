@@ -26,9 +26,9 @@ import numpy as np
 import xarray as xr
 
 from oaraim.mc.sweep import Count, Mean, Min
-from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, positive, probability
-from oaraim.studies.seed004_fig4 import TOL_M, Fig4Cell
+from oaraim.studies.common import seed004 as c
+from oaraim.studies.common.seed004 import TOL_M, Fig4Cell
 
 
 class Fig3OneSop(SweepStudy):

@@ -8,12 +8,12 @@ averaging over the 5000 realizations." Grid (DESIGN.md): sigma_URA^S = 0.5, 1, 2
 
 One realization: a GPS epoch and a BPP draw of the towers; HPL reduction = HPL(GPS only) -
 HPL(GPS + SOPs) (DESIGN.md: positive is better), averaged over the realizations where both are
-finite (the share is stored). Realizations use common random numbers (seed004_common): every
+finite (the share is stored). Realizations use common random numbers (studies.common.seed004): every
 cell of a panel sees the same geometries, every panel the same GPS epochs.
 
 Both PLs come from ``araim.protection_levels``' kernel: GPS alone (one constellation, order 1)
 and GPS + SOPs (two constellations; the order the P_thresh rule asks for, per geometry, capped
-by the cell's worst case, ``seed004_common.order_for``).
+by the cell's worst case, ``studies.common.seed004.order_for``).
 
 The paper's findings checked in the summary (section VI): (i) >= 2 "regular" SOPs reduce the
 HPL (regular: sigma_URA^S <= 2 m and P_s^S <= 1e-5, our reading of "reasonably small"); (ii)
@@ -23,116 +23,15 @@ HPL; and the closing remark: with enough SOPs, sigma_URA^S = 20 m (20 x GPS) and
 (100 x GPS) still reduce it.
 """
 
-import collections
-import functools
-import hashlib
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry
-from oaraim.araim.batching import jit_kernel
 from oaraim.mc.sweep import Count, Mean
-from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive, probability
-
-#: a reduction is "positive"/"negative" beyond twice the 1e-3 m PL solver tolerance
-TOL_M = 2e-3
-
-
-@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
-def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
-               d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes=c.FAULT_MODES):
-    """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
-    def draw(k):
-        _, az, el, v = c.draw_gps(k, t_az, t_el, t_valid)
-        tw = c.draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m)
-        return az, el, v, tw.az_rad, tw.el_rad
-
-    az, el, v, az_s, el_s = jax.vmap(draw)(keys)
-    x = c.concat_inputs(c.gps_inputs(el, v), c.sop_inputs(az_s.shape, sigma_ura_sop_m, p_s_sop,
-                                                          1))
-    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
-    hpl, vpl, status, order, _ = c.mhss(g, x, jnp.array([c.P_CONST_GPS, p_const_sop]),
-                                        max_order, fault_modes)
-    return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
-
-
-@functools.partial(jit_kernel, static_argnames=("fault_modes",))
-def gps_kernel(keys, t_az, t_el, t_valid, fault_modes=c.FAULT_MODES):
-    """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
-    epoch, az, el, v = jax.vmap(lambda k: c.draw_gps(k, t_az, t_el, t_valid))(keys)
-    hpl, vpl, status, _, _ = c.mhss(geometry.geometry_rows(az, el), c.gps_inputs(el, v),
-                                    jnp.array([c.P_CONST_GPS]), 1, fault_modes)
-    return {"hpl_gps_m": hpl, "vpl_gps_m": vpl, "status_gps": status, "epoch": epoch,
-            "n_gps": jnp.sum(v, -1)}
-
-
-#: GPS-only results by (sky table, keys): common random numbers make them identical in every
-#: cell, so a process computes them once per chunk of keys (a pure function, memoized)
-_GPS_CACHE = collections.OrderedDict()
-_GPS_CACHE_SIZE = 64
-
-
-def gps_only(keys, table, table_id, fault_modes=c.FAULT_MODES):
-    digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
-                             digest_size=16).hexdigest()
-    k = (table_id, digest, fault_modes)
-    if k not in _GPS_CACHE:
-        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes)
-        _GPS_CACHE[k] = {name: np.asarray(v) for name, v in out.items()}
-        while len(_GPS_CACHE) > _GPS_CACHE_SIZE:
-            _GPS_CACHE.popitem(last=False)
-    else:
-        _GPS_CACHE.move_to_end(k)
-    return _GPS_CACHE[k]
-
-
-def compare(gps, sop):
-    """Per-realization outputs of one cell from the GPS-only and GPS + SOP PLs."""
-    hg, hs = gps["hpl_gps_m"], np.asarray(sop["hpl_sop_m"])
-    vg, vs = gps["vpl_gps_m"], np.asarray(sop["vpl_sop_m"])
-    both = np.isfinite(hg) & np.isfinite(hs)
-    both_v = np.isfinite(vg) & np.isfinite(vs)
-    red = np.where(both, hg - np.where(both, hs, 0.0), 0.0)
-    red_v = np.where(both_v, vg - np.where(both_v, vs, 0.0), 0.0)
-    return {
-        "hpl_reduction_m": red, "vpl_reduction_m": red_v,
-        "hpl_gps_m": np.where(both, hg, 0.0), "hpl_sop_m": np.where(both, hs, 0.0),
-        "both_finite": both, "vpl_both_finite": both_v,
-        "hpl_reduced": both & (red > 0.0),
-        "hpl_increase_m": -red, "vpl_increase_m": -red_v,
-        "hpl_raised": both & (red <= TOL_M), "vpl_raised": both_v & (red_v <= TOL_M),
-        "order_2": np.asarray(sop["order_sop"]) >= 2,
-        "n_gps": gps["n_gps"].astype(np.float64),
-    }
-
-
-class Fig4Cell:
-    """The kernel of one cell: keys (chunk,) -> per-realization outputs (NumPy). ``coords``
-    gives n_sops, sigma_ura_sop_m and p_s_sop (axes, or fixed parameters)."""
-
-    def __init__(self, params, coords):
-        self.table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
-        self.table_id = (params["nav"], params["mask_deg"], params["sky_step_s"])
-        self.jtable = {k: jnp.asarray(self.table[k]) for k in ("az_rad", "el_rad", "valid")}
-        n_slots = self.table["az_rad"].shape[1]
-        self.n_sops = int(coords["n_sops"])
-        self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
-                     params["p_const_sop"], params["d_min_m"], params["d_max_m"],
-                     params["h_min_m"], params["h_max_m"])
-        self.fault_modes = params["fault_modes"]
-        self.max_order = c.order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
-                                     params["p_const_sop"], self.fault_modes)
-
-    def __call__(self, keys):
-        gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
-        sop = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
-                         self.jtable["valid"], self.n_sops, *self.args, self.max_order,
-                         self.fault_modes)
-        return compare(gps, sop)
+from oaraim.studies.common import seed004 as c
+from oaraim.studies.common.plotting import cell_edges
+from oaraim.studies.common.seed004 import TOL_M, Fig4Cell
 
 
 def largest_reducing_sigma(red_m, sigmas):
@@ -295,14 +194,3 @@ class Fig4HplMaps(SweepStudy):
         fig.savefig(path, dpi=120)
         plt.close(fig)
         return [path]
-
-
-def cell_edges(x, log):
-    """Cell edges for pcolormesh around centres x (geometric means on a log axis)."""
-    x = np.asarray(x, float)
-    if x.size == 1:
-        return np.array([x[0] / 2, x[0] * 2]) if log else np.array([x[0] - 0.5, x[0] + 0.5])
-    t = np.log10(x) if log else x
-    mid = (t[1:] + t[:-1]) / 2
-    e = np.concatenate([[t[0] - (mid[0] - t[0])], mid, [t[-1] + (t[-1] - mid[-1])]])
-    return 10.0**e if log else e

@@ -40,8 +40,8 @@ from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.fde import _separation
 from oaraim.araim.status import Status
 from oaraim.mc.sweep import Count, Max, Mean, Min
-from oaraim.studies import seed004_common as c
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, fault_modes_param
+from oaraim.studies.common import seed004 as c
 
 RAISE_TOL_M = 2e-3
 #: "unchanged" separations: both sides are S y from different factorizations of the same

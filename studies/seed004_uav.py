@@ -63,12 +63,18 @@ from oaraim.studies.base import (
     count,
     fault_modes_param,
     in_range,
-    non_negative,
     parse_recording,
     positive,
     probability,
 )
-from oaraim.studies.seed004_common import NAV_FILE, parse_nav, resolve_sky
+from oaraim.studies.common.seed004 import (
+    B_NOM_GPS,
+    NAV,
+    NAV_FILE,
+    P_CONST_GPS_PARAM,
+    P_SAT_GPS,
+    resolve_sky,
+)
 
 PUBLISHED_EPOCHS = 2880
 FLIGHT_S = 220.0
@@ -123,8 +129,8 @@ def synthesize(params, seed, scenario=None):
     _, carrier = sop_order(n_tw)
     source, desc, real = resolve_sky(params["nav"])
     if real:
-        from oaraim.studies.seed004_common import _day_start
-        day = _day_start(source, True)
+        from oaraim.studies.common.seed004 import day_start
+        day = day_start(source, True)
     else:
         day = float(gpstime.gps_seconds(2022, 1, 1))
     t0 = day + 3600.0 * params["start_h"]
@@ -193,9 +199,7 @@ class Seed004Uav(Study):
     test_realizations = 400
     nav_file = NAV_FILE
     params = {
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
-                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
-                     "navigation file"),
+        "nav": NAV,
         "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the take-off, hours of the "
                          "file's day (our choice: 10:00 local)", "h"),
         "n_epochs": Param(PUBLISHED_EPOCHS, count(10, 100000),
@@ -203,9 +207,9 @@ class Seed004Uav(Study):
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 004 VII-B)",
                           "deg"),
         "sigma_ura_gps_m": Param(1.0, positive, "GPS sigma_URA (Table I)", "m"),
-        "b_nom_m": Param(0.75, non_negative, "GPS nominal bias (Table I)", "m"),
-        "p_sat": Param(1e-5, probability, "GPS P_s (Table I)"),
-        "p_const": Param(1e-8, probability, "GPS P_const (Table I)"),
+        "b_nom_m": B_NOM_GPS,
+        "p_sat": P_SAT_GPS,
+        "p_const": P_CONST_GPS_PARAM,
         "sigma_ura_sop_m": Param(3.0, positive, "SOP sigma_URA^S (seed 004 VII-D: 3 m)", "m"),
         "p_s_sop": Param(1e-4, probability, "SOP P_s^S (seed 004 VII-A: 1e-4)"),
         "p_const_sop": Param(1e-4, probability, "SOP P_const^S per carrier (Table I)"),

@@ -17,13 +17,13 @@ from oaraim.araim.error_models import (
     sigma_user_ed259a_m,
     sop_variances,
 )
+from oaraim.cli import app
+from oaraim.execute import run_study
 from oaraim.geometry.ephemeris import GALILEO
 from oaraim.geometry.sky import look_angles
 from oaraim.reference_mhss import protection_levels_reference
+from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am
-from oaraim.studies.cli import app
-from oaraim.studies.execute import run_study
-from oaraim.studies.registry import STUDIES
 
 STUDY = STUDIES["availability-map"]
 #: two latitude rows x three longitudes x 4 epochs (3 h at 2700 s)

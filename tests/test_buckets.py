@@ -9,7 +9,7 @@ from oaraim import araim
 from oaraim.araim import mhss
 from oaraim.araim.batching import CHUNK, bucket
 from oaraim.araim.fault_modes import fault_mode_rule, to_batch_last
-from oaraim.studies.bench import mhss_bench_inputs
+from oaraim.bench import mhss_bench_inputs
 
 KEYS = ("g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const",
         "valid")

@@ -3,7 +3,7 @@
 import pytest
 from typer.testing import CliRunner
 
-from oaraim.studies.cli import app
+from oaraim.cli import app
 
 runner = CliRunner()
 
@@ -61,7 +61,7 @@ def test_list_prints_every_help_text_literally():
     """Issue 30: help texts are not Rich markup ("towers within [d_min_m, d_max_m] of a user"
     lost its brackets): every study's title and every parameter's text appear verbatim
     (whitespace folded, as the console wraps)."""
-    from oaraim.studies.registry import STUDIES
+    from oaraim.registry import STUDIES
 
     fold = lambda x: " ".join(x.split())  # noqa: E731
     text = fold(_run("list").output)

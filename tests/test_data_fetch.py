@@ -19,9 +19,9 @@ import xarray as xr
 from typer.testing import CliRunner
 
 from oaraim import data
+from oaraim.cli import app
+from oaraim.registry import STUDIES
 from oaraim.studies.base import Study, StudyResult
-from oaraim.studies.cli import app
-from oaraim.studies.registry import STUDIES
 
 SMALL = "almanac/almmops.txt"
 runner = CliRunner()
@@ -367,7 +367,7 @@ def test_cli_source_never_points_at_its_own_folder():
     """The installed CLI computes no path from its own location (no results/ beside it)."""
     import inspect
 
-    from oaraim.studies import cli
+    from oaraim import cli
 
     src = inspect.getsource(cli)
     assert "__file__" not in src and "RESULTS_DIR" not in src

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from oaraim.studies.bench import TABLE_BEGIN, TABLE_END, markdown_table
+from oaraim.bench import TABLE_BEGIN, TABLE_END, markdown_table
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -37,7 +37,7 @@ def _table_block(text):
 @pytest.mark.parametrize("page", [README, DOCS / "benchmarks.md"], ids=lambda p: p.name)
 def test_bench_table_matches_committed_json(page):
     """The table is generated from docs/bench.json; regenerate it with
-    `python -m oaraim.studies.bench --table docs/bench.json --update README.md
+    `python -m oaraim.bench --table docs/bench.json --update README.md
     docs/benchmarks.md`."""
     expected = markdown_table(json.loads((DOCS / "bench.json").read_text()))
     assert _table_block(page.read_text()) == expected

@@ -9,8 +9,8 @@ import pytest
 
 from oaraim import geometry, mc, sim
 from oaraim.araim import ekf_replay
-from oaraim.studies.execute import run_study
-from oaraim.studies.registry import STUDIES
+from oaraim.execute import run_study
+from oaraim.registry import STUDIES
 
 DUR_S = 30.0  # the first 30 s of the seed 000 drive: fault on tower 1 from 25 s
 

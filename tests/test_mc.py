@@ -52,10 +52,10 @@ def _toy_kernel(keys):
 @pytest.mark.parametrize("chunk", [1024, 3072, 8192])
 def test_outputs_and_means_bit_identical_for_any_chunk_size(chunk):
     n = 9000
-    ref_mean = Mean()
+    ref_mean = Mean("norm")
     ref = run_chunked(_toy_kernel, n, seed=1, chunk_size=2048, keep=("x0", "norm"),
                       on_chunk=lambda s, o: ref_mean.update(s, o["norm"]))
-    m = Mean()
+    m = Mean("norm")
     got = run_chunked(_toy_kernel, n, seed=1, chunk_size=chunk, keep=("x0", "norm"),
                       on_chunk=lambda s, o: m.update(s, o["norm"]))
     for k in ref:
@@ -68,7 +68,7 @@ def test_outputs_and_means_bit_identical_for_any_chunk_size(chunk):
 
 
 def test_mean_skips_non_finite_and_masked_values_and_reports_share():
-    m = Mean()
+    m = Mean("norm")
     v = np.arange(2 * BLOCK, dtype=float)
     v[5] = np.inf
     mask = np.ones(v.size, bool)
@@ -85,7 +85,7 @@ def test_mean_skips_non_finite_and_masked_values_and_reports_share():
 def test_mean_combines_blocks_in_index_order_whatever_the_arrival_order():
     rng = np.random.default_rng(0)
     v = rng.standard_normal(4 * BLOCK) * 1e8
-    a, b = Mean(), Mean()
+    a, b = Mean("v"), Mean("v")
     a.update(0, v)
     b.update(2 * BLOCK, v[2 * BLOCK:])
     b.update(0, v[: 2 * BLOCK])
@@ -93,7 +93,7 @@ def test_mean_combines_blocks_in_index_order_whatever_the_arrival_order():
 
 
 def test_empirical_cdf_hand_case():
-    cdf = EmpiricalCDF([0.0, 1.0, 2.0, 3.0])
+    cdf = EmpiricalCDF("x", [0.0, 1.0, 2.0, 3.0])
     cdf.update(0, np.array([1.0, 2.5, np.inf, 0.5]))
     np.testing.assert_array_equal(cdf.counts, [0, 2, 2, 3])
     assert cdf.value_at(1.0) == 0.5
@@ -104,7 +104,7 @@ def test_empirical_cdf_hand_case():
 
 
 def test_histogram_hand_case():
-    h = Histogram([0.0, 1.0, 2.0])
+    h = Histogram("x", [0.0, 1.0, 2.0])
     h.update(0, np.array([0.2, 1.0, 2.0, 5.0, np.inf]))
     np.testing.assert_array_equal(h.counts, [1, 2])
     assert h.outside == 2 and h.total == 5

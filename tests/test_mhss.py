@@ -921,7 +921,7 @@ def test_bench_case_is_proved_by_the_taylor_step():
     round, bracketed solver returning NaN), at most 1 of 4096 geometries is NOT_CONVERGED
     (measured: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
     from oaraim.araim import mhss
-    from oaraim.studies.bench import mhss_bench_inputs
+    from oaraim.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(4096, seed=3)
 
@@ -951,7 +951,7 @@ def test_threaded_split_is_bit_identical_to_one_call():
     (fewer than 2 chunks per thread)."""
     from oaraim.araim.batching import CHUNK
     from oaraim.araim.mhss import prepare_inputs, protection_levels_threaded
-    from oaraim.studies.bench import mhss_bench_inputs
+    from oaraim.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
@@ -996,7 +996,7 @@ def test_kernel_compiler_options_change_no_bit():
     3 (whole, single and generic modes) and the FDE functions, all bit-identical."""
     from oaraim.araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
     from oaraim.araim.mhss import _protection_levels, prepare_inputs, protection_levels_threaded
-    from oaraim.studies.bench import mhss_bench_inputs
+    from oaraim.bench import mhss_bench_inputs
 
     assert KERNEL_COMPILER_OPTIONS  # else this compares a kernel with itself
     x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)

@@ -9,8 +9,8 @@ import pytest
 from oaraim import araim, geometry
 from oaraim.constants import C_M_S
 from oaraim.geometry import rinex_obs
+from oaraim.registry import STUDIES
 from oaraim.studies import rinex_replay
-from oaraim.studies.registry import STUDIES
 
 STATIONS = ("07590920", "30400920")
 
@@ -206,7 +206,7 @@ def test_rinex_replay_bad_epoch_is_one_line_exit_2(shared_data, tmp_path):
     the line and counts the skipped epoch in its metrics."""
     from typer.testing import CliRunner
 
-    from oaraim.studies.cli import app
+    from oaraim.cli import app
 
     lines = _obs_lines(shared_data)
     lines[62] = lines[62][:13] + "6x" + lines[62][15:]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from oaraim import geometry, mc
+from oaraim.execute import run_study
 from oaraim.reference import slopes_reference
+from oaraim.registry import STUDIES
 from oaraim.studies import seed001_fig5 as f5
-from oaraim.studies.execute import run_study
-from oaraim.studies.registry import STUDIES
 
 STUDY = STUDIES["seed001-fig5-madrid-24h"]
 SHORT = {"duration_h": 1.0, "step_s": 120.0}  # 30 epochs: seconds, not minutes
@@ -81,7 +81,7 @@ def test_auto_sky_without_the_file_stops_with_one_line(tmp_path, monkeypatch):
     any computation, exit 2, one line naming the file, the fetch command and nav=nominal."""
     from typer.testing import CliRunner
 
-    from oaraim.studies.cli import app
+    from oaraim.cli import app
 
     empty = tmp_path / "data"
     empty.mkdir()

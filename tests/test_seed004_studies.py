@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from oaraim import araim, geometry, mc
-from oaraim.studies import seed004_common as c
-from oaraim.studies.registry import STUDIES
-from oaraim.studies.seed004_fig4 import Fig4Cell, largest_reducing_sigma, monotone_share
+from oaraim.registry import STUDIES
+from oaraim.studies.common import seed004 as c
+from oaraim.studies.common.seed004 import Fig4Cell
+from oaraim.studies.seed004_fig4 import largest_reducing_sigma, monotone_share
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py

@@ -6,7 +6,7 @@ import pytest
 
 from oaraim import geometry, sim
 from oaraim.geometry import epoch_geometry
-from oaraim.studies.registry import STUDIES
+from oaraim.registry import STUDIES
 from oaraim.studies.seed004_uav import synthesize
 
 

@@ -8,11 +8,11 @@ import pytest
 import xarray as xr
 
 from oaraim import mc
+from oaraim.execute import run_study
 from oaraim.reference import slopes_reference
+from oaraim.registry import STUDIES
+from oaraim.report import build_report
 from oaraim.studies import seed001_fig3, seed001_fig4
-from oaraim.studies.execute import run_study
-from oaraim.studies.registry import STUDIES
-from oaraim.studies.report import build_report
 
 
 def test_fig3_kernel_matches_numpy_oracle_argmin():

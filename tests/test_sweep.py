@@ -18,10 +18,12 @@ from oaraim.mc.reduce import BLOCK
 from oaraim.mc.sweep import (
     Axis,
     Count,
+    Execution,
     Histogram,
     Max,
     Mean,
     Min,
+    Storage,
     Values,
     cell_key_id,
     run_sweep,
@@ -47,11 +49,21 @@ def toy_factory(coords):
     return functools.partial(toy_kernel, a=float(coords["a"]), b=float(coords["b"]))
 
 
+def _sweep(factory, axes, n, reducers, *, out_dir, fingerprint, resume=False, threads=None,
+           workers=None, scheduler=None, chunk_size=None, scheduler_timeout_s=10.0, **kw):
+    """``run_sweep`` with its storage and execution options gathered into their objects."""
+    return run_sweep(factory, axes, n, reducers,
+                     storage=Storage(out_dir, fingerprint, resume=resume),
+                     execution=Execution(threads=threads, workers=workers, scheduler=scheduler,
+                                         scheduler_timeout_s=scheduler_timeout_s,
+                                         chunk_size=chunk_size), **kw)
+
+
 def _run(tmp_path, name="out", axes=AXES, n=5000, chunk=2048, key_axes=("a",), **kw):
     kw.setdefault("fingerprint", {"toy": 1})
-    return run_sweep(toy_factory, axes, n, kw.pop("reducers", REDUCERS), seed=kw.pop("seed", 3),
-                     key_axes=key_axes, out_dir=tmp_path / name, chunk_size=chunk,
-                     progress=False, **kw)
+    return _sweep(toy_factory, axes, n, kw.pop("reducers", REDUCERS), seed=kw.pop("seed", 3),
+                  key_axes=key_axes, out_dir=tmp_path / name, chunk_size=chunk,
+                  progress=False, **kw)
 
 
 def _assert_cells_equal(ds_a, ds_b, **cell):
@@ -113,14 +125,14 @@ def _hand_factory(coords):
 def test_reducers_hand_case_ignore_padding(tmp_path):
     reducers = (Mean("v", where="w"), Max("v"), Min("v"), Histogram("v", (0.0, 2.0, 6.0)),
                 Count("w"))
-    res = run_sweep(_hand_factory, (Axis("k", (0,)),), 3, reducers, seed=0, out_dir=tmp_path,
+    res = _sweep(_hand_factory, (Axis("k", (0,)),), 3, reducers, seed=0, out_dir=tmp_path,
                     fingerprint={}, progress=False)
     c = res.dataset.sel(k=0)
     assert c["v_mean"] == -0.5 and c["v_count"] == 2
     assert c["v_max"] == 5.0 and c["v_min"] == -2.0
     np.testing.assert_array_equal(c["v_hist"].values, [1, 1])
     assert c["v_outside"] == 1 and c["w_count"] == 2
-    res = run_sweep(_hand_factory, (Axis("k", (0,)),), 3, (Max("v", where="w"),
+    res = _sweep(_hand_factory, (Axis("k", (0,)),), 3, (Max("v", where="w"),
                     Min("v", where="w")), seed=0, out_dir=tmp_path, fingerprint={},
                     progress=False)
     assert res.dataset["v_max"].item() == 1.0 and res.dataset["v_min"].item() == -2.0
@@ -131,7 +143,7 @@ def _empty_where_factory(coords):
 
 
 def test_reducers_with_nothing_included(tmp_path):
-    res = run_sweep(_empty_where_factory, (Axis("k", (0,)),), 10,
+    res = _sweep(_empty_where_factory, (Axis("k", (0,)),), 10,
                     (Mean("v", where="w"), Max("v", where="w"), Min("v", where="w"),
                      Histogram("v", (0.0, 2.0), where="w")), seed=0, out_dir=tmp_path,
                     fingerprint={}, progress=False)
@@ -151,9 +163,9 @@ def _nan_factory(coords):
 
 def test_nan_in_an_included_realization_is_an_error_naming_the_output(tmp_path):
     with pytest.raises(FloatingPointError, match="'v'.*NaN"):
-        run_sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v"),), seed=0,
+        _sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v"),), seed=0,
                   out_dir=tmp_path, fingerprint={}, progress=False)
-    res = run_sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v", where="w"),), seed=0,
+    res = _sweep(_nan_factory, (Axis("k", (0,)),), 10, (Mean("v", where="w"),), seed=0,
                     out_dir=tmp_path, fingerprint={}, progress=False)
     assert res.dataset["v_mean"].item() == 1.0 and res.dataset["v_count"].item() == 9
 
@@ -191,10 +203,10 @@ def test_an_error_in_a_thread_is_raised_and_a_resume_completes(tmp_path):
     _BROKEN["k"] = 2
     try:
         with pytest.raises(RuntimeError, match="cell k=2 broke"):
-            run_sweep(_failing_factory, axes, 1024, (Mean("v"),), **kw)
+            _sweep(_failing_factory, axes, 1024, (Mean("v"),), **kw)
     finally:
         _BROKEN["k"] = None
-    res = run_sweep(_failing_factory, axes, 1024, (Mean("v"),), resume=True, **kw)
+    res = _sweep(_failing_factory, axes, 1024, (Mean("v"),), resume=True, **kw)
     assert res.chunks_reused + res.chunks_computed == 6 and res.chunks_computed >= 1
     assert res.dataset["v_mean"].values.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
 
@@ -250,14 +262,14 @@ def _recording_factory(coords):
 
 def test_kernel_built_once_per_cell_and_always_sees_batch_size_keys(tmp_path):
     _CALLS.clear()
-    run_sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
+    _sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
               out_dir=tmp_path, fingerprint={}, chunk_size=2048, progress=False)
     assert sorted(c for c in _CALLS if c[0] == "factory") == [("factory", a) for a in
                                                                (1, 1, 2, 2, 3, 3)]
     assert {c for c in _CALLS if c[0] == "call"} == {("call", (1024,))}  # default batch
     assert sum(c[0] == "call" for c in _CALLS) == 6 * 3  # 2500 -> 3 padded batches
     _CALLS.clear()
-    res = run_sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
+    res = _sweep(_recording_factory, AXES, 2500, REDUCERS, seed=3, key_axes=("a",),
                     out_dir=tmp_path, fingerprint={}, chunk_size=1024, batch_size=2048,
                     progress=False)
     assert res.chunk_size == 2048 and res.batch_size == 2048  # chunks hold whole batches
@@ -385,7 +397,7 @@ def test_index_kernel_and_values_keep_every_realization_for_any_chunking(tmp_pat
     n = 2500  # three blocks, the last one partial
     axes = (Axis("a", (1, 2)),)
     red = (Values("v", n), Values("k", n, "int64"), Values("even", n, "bool"), Mean("v"))
-    runs = [run_sweep(_IndexKernel, axes, n, red, seed=7, key_axes=("a",),
+    runs = [_sweep(_IndexKernel, axes, n, red, seed=7, key_axes=("a",),
                       out_dir=tmp_path / f"c{c}", fingerprint={"i": 1}, chunk_size=c,
                       progress=False).dataset for c in (1024, 3072)]
     for ds in runs:

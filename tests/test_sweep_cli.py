@@ -18,10 +18,10 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from oaraim.mc.sweep import Count, Histogram, Max, Mean
+from oaraim.cli import app
+from oaraim.execute import run_study
+from oaraim.mc.sweep import Count, Execution, Histogram, Max, Mean
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive
-from oaraim.studies.cli import app
-from oaraim.studies.execute import run_study
 from tests.test_sweep import EDGES, toy_factory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,15 +69,15 @@ class ToySweep(SweepStudy):
 
 
 TOY = ToySweep()
-BOOT = ("import oaraim.studies.registry as r, tests.test_sweep_cli as t; "
+BOOT = ("import oaraim.registry as r, tests.test_sweep_cli as t; "
         "r.STUDIES[t.TOY.name] = t.TOY; "
         "import atexit, sys; atexit.register(lambda: print('distributed imported:', "
-        "'distributed' in sys.modules)); from oaraim.studies.cli import main; main()")
+        "'distributed' in sys.modules)); from oaraim.cli import main; main()")
 
 
 @pytest.fixture
 def toy(monkeypatch):
-    from oaraim.studies import registry
+    from oaraim import registry
 
     monkeypatch.setitem(registry.STUDIES, TOY.name, TOY)
     return TOY
@@ -193,7 +193,8 @@ def test_two_worker_local_dask_cluster_is_bit_identical_to_in_process(tmp_path, 
                                sets=["chunk=2048"], show_progress=False)
     t0 = time.perf_counter()
     _, dist, _, _ = run_study(TOY.name, realizations=2500, out=tmp_path / "dask",
-                              sets=["chunk=1024"], show_progress=False, workers=2)
+                              sets=["chunk=1024"], show_progress=False,
+                              execution=Execution(workers=2))
     wall = time.perf_counter() - t0
     xr.testing.assert_identical(_data(dist), _data(local))
     p = _prov(dist)["sweep"]
@@ -229,8 +230,8 @@ def test_sweep_study_run_works_without_an_output_folder(toy):
 def test_registered_studies_travel_to_workers_by_name(toy):
     """A registered study of the package reaches Dask workers as its name (looked up there),
     a study defined elsewhere (the toy) as the pickled object."""
-    from oaraim.studies.execute import _study_ref
-    from oaraim.studies.registry import STUDIES
+    from oaraim.execute import _study_ref
+    from oaraim.registry import STUDIES
 
     assert _study_ref(STUDIES["seed004-fig4-hpl-maps"]) == "seed004-fig4-hpl-maps"
     assert _study_ref(toy) is toy

@@ -1,4 +1,4 @@
-"""Run one study end to end: validate, compute, store, plot."""
+"""Run one study end to end: validate, compute, store, plot (the app layer above studies/)."""
 
 import functools
 import time
@@ -7,8 +7,13 @@ from pathlib import Path
 
 from oaraim.mc.progress import ProgressBar
 from oaraim.mc.store import OutputLock, provenance, write_results
+from oaraim.mc.sweep import Execution
+from oaraim.registry import STUDIES, get_study
+from oaraim.studies import base
 from oaraim.studies.base import SweepStudy
-from oaraim.studies.registry import STUDIES, get_study
+
+__all__ = ["check_data", "data_provenance", "parse_sets", "run_study", "run_sweep_study",
+           "sweep_kernel"]
 
 SWEEP_FLAGS = "--resume, --workers and --scheduler"
 
@@ -27,7 +32,7 @@ def parse_sets(sets):
 
 def sweep_kernel(study, params, coords):
     """Kernel factory of a sweep study, picklable for Dask workers: ``study`` is the name of a
-    registered study (looked up in ``studies.registry`` in the worker) or a study object (one
+    registered study (looked up in ``oaraim.registry`` in the worker) or a study object (one
     defined outside ``studies/``, e.g. in a test; it travels pickled)."""
     s = get_study(study) if isinstance(study, str) else study
     return s.kernel(params, coords)
@@ -40,31 +45,19 @@ def _study_ref(study):
     return study.name if registered and in_package else study
 
 
-def sweep_fingerprint(study, params, realizations, seed):
-    """What determines a sweep's results (stored in OUT/STUDY/sweep.json; a resume must match).
-    The chunk size is left out: results do not depend on it and a resume may change it."""
-    return {"study": study.name,
-            "params": {k: v for k, v in params.items() if k != study.chunk_param},
-            "seed": int(seed), "realizations": int(realizations)}
+def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
+                    execution=None, progress=True):
+    """``studies.base.run_sweep_study`` with a kernel factory that Dask workers can rebuild:
+    a registered study travels by name (``sweep_kernel``). Returns (StudyResult, SweepResult).
+    """
+    return base.run_sweep_study(
+        study, params, realizations, seed, out_dir, resume=resume, execution=execution,
+        progress=progress,
+        kernel_factory=functools.partial(sweep_kernel, _study_ref(study), params))
 
 
-def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False, workers=None,
-                    scheduler=None, progress=True):
-    """Run a ``SweepStudy`` through ``mc.sweep.run_sweep`` into ``out_dir`` (its chunks and
-    sweep.json); returns (StudyResult from ``study.finish``, SweepResult)."""
-    from oaraim.mc.sweep import run_sweep
-
-    sweep = run_sweep(
-        functools.partial(sweep_kernel, _study_ref(study), params), study.axes(params),
-        realizations, study.reducers(params), seed=seed, key_axes=study.key_axes,
-        out_dir=out_dir, fingerprint=sweep_fingerprint(study, params, realizations, seed),
-        chunk_size=study.chunk_size(params), batch_size=study.batch_size(params),
-        resume=resume, workers=workers, scheduler=scheduler, progress=progress,
-        description=study.name)
-    return study.finish(params, sweep.dataset, realizations, seed), sweep
-
-
-def _check_sweep_flags(study, resume, workers, scheduler):
+def _check_sweep_flags(study, resume, execution):
+    workers, scheduler = execution.workers, execution.scheduler
     if not isinstance(study, SweepStudy):
         if resume or workers is not None or scheduler is not None:
             sweeps = [n for n, s in STUDIES.items() if isinstance(s, SweepStudy)]
@@ -79,11 +72,13 @@ def _check_sweep_flags(study, resume, workers, scheduler):
 
 
 def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=False,
-              show_progress=True, resume=False, workers=None, scheduler=None):
+              show_progress=True, resume=False, execution=None):
     """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder, figure
-    paths, wall time in s). Sweep studies also take ``resume``, ``workers``, ``scheduler``."""
+    paths, wall time in s). Sweep studies also take ``resume`` and ``execution`` (an
+    ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler`` address)."""
     study = get_study(name)
-    _check_sweep_flags(study, resume, workers, scheduler)
+    execution = Execution() if execution is None else execution
+    _check_sweep_flags(study, resume, execution)
     overrides = parse_sets(sets)
     if quick:
         overrides = {**study.quick_sets, **overrides}
@@ -109,16 +104,15 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
             warnings.warn(f"{out_dir}: took over the lock of process {lock.taken_over}, which "
                           "is no longer running", stacklevel=2)
         return _run_locked(study, params, realizations, seed, out_dir, show_progress, resume,
-                           workers, scheduler)
+                           execution)
 
 
-def _run_locked(study, params, realizations, seed, out_dir, show_progress, resume, workers,
-                scheduler):
+def _run_locked(study, params, realizations, seed, out_dir, show_progress, resume, execution):
     t0 = time.perf_counter()
     extra = {}
     if isinstance(study, SweepStudy):
         result, sweep = run_sweep_study(study, params, realizations, seed, out_dir,
-                                        resume=resume, workers=workers, scheduler=scheduler,
+                                        resume=resume, execution=execution,
                                         progress=show_progress)
         extra["sweep"] = _sweep_provenance(sweep, resume)
     else:

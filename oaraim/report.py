@@ -3,7 +3,7 @@
 import json
 from pathlib import Path
 
-from oaraim.studies.registry import STUDIES
+from oaraim.registry import STUDIES
 
 
 def _fmt(v):
@@ -25,6 +25,7 @@ def _params_line(prov):
 
 
 def sensitivity_table(rows):
+    """Markdown table lines of a study's ``sensitivity`` metric (seed 001 Fig. 4)."""
     lines = ["| P_FA | P_MD | sigma (m) | sigma sqrt(lambda_det) (m) | avail. GNSS (%) | "
              "avail. SOP (%) | matching HAL (m) |", "|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -28,7 +28,9 @@ sensitivity run in results/):
     SOPs, so neighbouring cells differ by their parameters only, not by sampling noise.
 """
 
+import collections
 import functools
+import hashlib
 from pathlib import Path
 
 import jax
@@ -36,12 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import geometry, mc
+from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import _protection_levels, required_order
 from oaraim.geometry import gpstime
-from oaraim.studies import seed001_fig5 as fig5
 from oaraim.studies.base import (
     Param,
     check_bpp_annulus,
@@ -52,6 +54,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
+from oaraim.studies.common import sky
 
 #: seed 004 section VI, ECEF metres
 ORANGE_COUNTY_ECEF_M = (-2482345.0, -4700049.0, 3513616.0)
@@ -75,15 +78,23 @@ P_S_GRID = tuple(float(f"{m}e{e}") for e in range(-7, -1) for m in (1, 3)) + (0.
 
 
 #: 'auto' (NAV_FILE, fetched if missing), 'nominal', or a navigation file
-parse_nav = fig5.parse_nav
+parse_nav = sky.parse_nav
+
+
+#: the ``nav`` parameter of the studies that fly or drive under the 2022-01-01 sky
+NAV = Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
+                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
+                     "navigation file")
+#: Table I GPS parameters of the studies that expose them one by one (UAV, RINEX replay)
+B_NOM_GPS = Param(B_NOM_GPS_M, non_negative, "GPS nominal bias (seed 004 Table I)", "m")
+P_SAT_GPS = Param(P_S_GPS, probability, "GPS P_s (seed 004 Table I)")
+P_CONST_GPS_PARAM = Param(P_CONST_GPS, probability, "GPS P_const (seed 004 Table I)")
 
 
 def common_params():
     """Parameters every seed 004 sweep study exposes (defaults above)."""
     return {
-        "nav": Param("auto", parse_nav, "GPS sky: 'auto' (nav/brdc0010.22n, fetched if missing: "
-                     "`oaraim data list`), 'nominal' (built-in 24 slots), or a RINEX "
-                     "navigation file"),
+        "nav": NAV,
         "mask_deg": Param(5.0, in_range(0.0, 89.0),
                           "GPS elevation mask (seed 004 silent; ARAIM practice 5 deg)", "deg"),
         "sky_step_s": Param(10.0, in_range(1.0, 600.0),
@@ -105,14 +116,16 @@ check_geometry_params = check_bpp_annulus
 
 
 def resolve_sky(nav):
-    """(source for geometry.sky, description, is a real file): ``fig5.resolve_sky`` with
-    ``NAV_FILE`` (no silent nominal fallback)."""
-    return fig5.resolve_sky(nav, NAV_FILE)
+    """(source for geometry.sky, description, is a real file): ``common.sky.resolve_sky``
+    with ``NAV_FILE`` (no silent nominal fallback)."""
+    return sky.resolve_sky(nav, NAV_FILE)
 
 
-def _day_start(source, real):
+def day_start(source, real):
+    """00:00 GPS time of the sky's day: the file's day for a real file (``resolve_sky``'s
+    third value), else ``DEFAULT_DAY``."""
     if real:
-        return fig5.file_day_start(geometry.load_navigation(source, systems=("G",)))
+        return sky.file_day_start(geometry.load_navigation(source, systems=("G",)))
     return float(gpstime.gps_seconds(*DEFAULT_DAY))
 
 
@@ -121,7 +134,7 @@ def gps_sky_table(nav, mask_deg, step_s):
     """The GPS sky over one day at the receiver: dict of az/el/valid ``(E, S)`` with the
     visible satellites moved to the front and S the most ever visible, plus a description."""
     source, desc, real = resolve_sky(nav)
-    t0 = _day_start(source, real)
+    t0 = day_start(source, real)
     n_t = int(round(86400.0 / step_s))
     t = t0 + step_s * np.arange(n_t)
     s = geometry.sky(np.array(ORANGE_COUNTY_ECEF_M), t, source=source, mask_deg=mask_deg,
@@ -170,6 +183,7 @@ def sop_inputs(shape, sigma_ura_sop_m, p_s_sop, label):
 
 
 def concat_inputs(a, b):
+    """Two input dicts (``gps_inputs``, ``sop_inputs``) joined along the source axis."""
     return {k: jnp.concatenate([a[k], b[k]], -1) for k in a}
 
 
@@ -192,3 +206,105 @@ def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop, fault_modes=FAULT_MODES
     p_const = np.array([[P_CONST_GPS, p_const_sop]])
     return int(required_order(jnp.asarray(valid), jnp.asarray(const), jnp.asarray(p_sat),
                               jnp.asarray(p_const), BUDGET, cap=2, fault_modes=fault_modes))
+
+
+# ----------------------------------------------------------------------------------------------
+# the cell of seed 004 Figs. 3 and 4: HPL/VPL of GPS alone and of GPS + SOPs per realization
+
+#: a reduction is "positive"/"negative" beyond twice the 1e-3 m PL solver tolerance
+TOL_M = 2e-3
+
+
+@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
+def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
+               d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes=FAULT_MODES):
+    """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
+    def draw(k):
+        _, az, el, v = draw_gps(k, t_az, t_el, t_valid)
+        tw = draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m)
+        return az, el, v, tw.az_rad, tw.el_rad
+
+    az, el, v, az_s, el_s = jax.vmap(draw)(keys)
+    x = concat_inputs(gps_inputs(el, v), sop_inputs(az_s.shape, sigma_ura_sop_m, p_s_sop,
+                                                          1))
+    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
+    hpl, vpl, status, order, _ = mhss(g, x, jnp.array([P_CONST_GPS, p_const_sop]),
+                                        max_order, fault_modes)
+    return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
+
+
+@functools.partial(jit_kernel, static_argnames=("fault_modes",))
+def gps_kernel(keys, t_az, t_el, t_valid, fault_modes=FAULT_MODES):
+    """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
+    epoch, az, el, v = jax.vmap(lambda k: draw_gps(k, t_az, t_el, t_valid))(keys)
+    hpl, vpl, status, _, _ = mhss(geometry.geometry_rows(az, el), gps_inputs(el, v),
+                                    jnp.array([P_CONST_GPS]), 1, fault_modes)
+    return {"hpl_gps_m": hpl, "vpl_gps_m": vpl, "status_gps": status, "epoch": epoch,
+            "n_gps": jnp.sum(v, -1)}
+
+
+#: GPS-only results by (sky table, keys): common random numbers make them identical in every
+#: cell, so a process computes them once per chunk of keys (a pure function, memoized)
+_GPS_CACHE = collections.OrderedDict()
+_GPS_CACHE_SIZE = 64
+
+
+def gps_only(keys, table, table_id, fault_modes=FAULT_MODES):
+    """``gps_kernel`` of a chunk of keys, memoized per process: with common random numbers
+    every cell of a run shares it."""
+    digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
+                             digest_size=16).hexdigest()
+    k = (table_id, digest, fault_modes)
+    if k not in _GPS_CACHE:
+        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes)
+        _GPS_CACHE[k] = {name: np.asarray(v) for name, v in out.items()}
+        while len(_GPS_CACHE) > _GPS_CACHE_SIZE:
+            _GPS_CACHE.popitem(last=False)
+    else:
+        _GPS_CACHE.move_to_end(k)
+    return _GPS_CACHE[k]
+
+
+def compare(gps, sop):
+    """Per-realization outputs of one cell from the GPS-only and GPS + SOP PLs."""
+    hg, hs = gps["hpl_gps_m"], np.asarray(sop["hpl_sop_m"])
+    vg, vs = gps["vpl_gps_m"], np.asarray(sop["vpl_sop_m"])
+    both = np.isfinite(hg) & np.isfinite(hs)
+    both_v = np.isfinite(vg) & np.isfinite(vs)
+    red = np.where(both, hg - np.where(both, hs, 0.0), 0.0)
+    red_v = np.where(both_v, vg - np.where(both_v, vs, 0.0), 0.0)
+    return {
+        "hpl_reduction_m": red, "vpl_reduction_m": red_v,
+        "hpl_gps_m": np.where(both, hg, 0.0), "hpl_sop_m": np.where(both, hs, 0.0),
+        "both_finite": both, "vpl_both_finite": both_v,
+        "hpl_reduced": both & (red > 0.0),
+        "hpl_increase_m": -red, "vpl_increase_m": -red_v,
+        "hpl_raised": both & (red <= TOL_M), "vpl_raised": both_v & (red_v <= TOL_M),
+        "order_2": np.asarray(sop["order_sop"]) >= 2,
+        "n_gps": gps["n_gps"].astype(np.float64),
+    }
+
+
+class Fig4Cell:
+    """The kernel of one cell: keys (chunk,) -> per-realization outputs (NumPy). ``coords``
+    gives n_sops, sigma_ura_sop_m and p_s_sop (axes, or fixed parameters)."""
+
+    def __init__(self, params, coords):
+        self.table = gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
+        self.table_id = (params["nav"], params["mask_deg"], params["sky_step_s"])
+        self.jtable = {k: jnp.asarray(self.table[k]) for k in ("az_rad", "el_rad", "valid")}
+        n_slots = self.table["az_rad"].shape[1]
+        self.n_sops = int(coords["n_sops"])
+        self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
+                     params["p_const_sop"], params["d_min_m"], params["d_max_m"],
+                     params["h_min_m"], params["h_max_m"])
+        self.fault_modes = params["fault_modes"]
+        self.max_order = order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
+                                     params["p_const_sop"], self.fault_modes)
+
+    def __call__(self, keys):
+        gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
+        sop = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
+                         self.jtable["valid"], self.n_sops, *self.args, self.max_order,
+                         self.fault_modes)
+        return compare(gps, sop)

@@ -45,8 +45,8 @@ def _trust(on: bool):
 @app.command("list")
 def list_studies():
     """List the studies with their parameters and defaults."""
+    from oaraim.registry import STUDIES
     from oaraim.studies.base import SweepStudy
-    from oaraim.studies.registry import STUDIES
 
     for name, s in STUDIES.items():
         # the texts are printed literally (markup=False): a "[d_min_m, d_max_m]" in a help
@@ -87,7 +87,8 @@ def run(
     trust_data: Annotated[bool, typer.Option("--trust-data", help=TRUST_HELP)] = False,
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
-    from oaraim.studies.execute import run_study
+    from oaraim.execute import run_study
+    from oaraim.mc.sweep import Execution
 
     _trust(trust_data)
 
@@ -95,7 +96,8 @@ def run(
         summary, sdir, figures, wall = run_study(study, realizations=realizations, seed=seed,
                                                  out=out_dir, sets=set_, quick=quick,
                                                  show_progress=progress, resume=resume,
-                                                 workers=workers, scheduler=scheduler)
+                                                 execution=Execution(workers=workers,
+                                                                     scheduler=scheduler))
     except (ValueError, OSError) as e:  # bad input, unusable --out, a full disk: one line
         _fail(str(e))
     _print_rows(summary)
@@ -119,7 +121,7 @@ def report(
     write: Annotated[Path | None, typer.Option(help="also write the Markdown here")] = None,
 ):
     """Markdown table of every study's published vs reproduced numbers."""
-    from oaraim.studies.report import build_report
+    from oaraim.report import build_report
 
     text = build_report(out_dir)
     if text is None:
@@ -152,9 +154,9 @@ def reproduce(
     A failing study is reported as FAILED and the others still run; the exit status is 2 if
     any failed. Full size writes OUT/REPORT.md, or DIR/REPORT.md with --results DIR.
     """
-    from oaraim.studies.execute import check_data, run_study
-    from oaraim.studies.registry import STUDIES
-    from oaraim.studies.report import build_report
+    from oaraim.execute import check_data, run_study
+    from oaraim.registry import STUDIES
+    from oaraim.report import build_report
 
     _trust(trust_data)
 
@@ -242,7 +244,7 @@ def bench(
         "--fig4", help="also seed004-fig4-hpl-maps at its full size (minutes)")] = False,
 ):
     """Throughput of the kernels and the NumPy reference in the same run."""
-    from oaraim.studies import bench as b
+    from oaraim import bench as b
 
     st = b.bench_startup()
     out.print(f"start-up: import oaraim {st['import_oaraim_s']:.2f} s, from oaraim import "
@@ -304,7 +306,7 @@ def bench(
     out.print(f"sky, 1,000 receivers x 288 epochs, nominal GPS + Galileo: "
               f"{sk['receivers_1000_x_288_epochs_nominal_s']:.3f} s (target < 10 s)",
               highlight=False)
-    from oaraim.studies.bench_ekf import bench_ekf_drive
+    from oaraim.bench_ekf import bench_ekf_drive
 
     runs = 100 if quick else 1000
     res["ekf_drive"] = e = bench_ekf_drive(runs)
@@ -412,6 +414,7 @@ def data_nav(
 
 
 def main():
+    """The ``oaraim`` console script: the Typer app, Ctrl-C as one line and exit status 130."""
     try:
         app()
     except KeyboardInterrupt:
