@@ -38,7 +38,7 @@ def realization_keys(seed: int, cell: int, start: int, count: int):
 #: name -> integer tag of the named streams, grouped by the parent key they are derived from;
 #: an indexed stream uses tags tag .. tag + n - 1 (n given in the comment)
 STREAMS = {
-    # under the key of one geometry draw of the seed 004 studies (studies.seed004_common)
+    # under the key of one geometry draw of the seed 004 studies (studies.common.seed004)
     "gps_epoch": 0,  # the epoch of the day's GPS sky table
     "bpp_towers": 1,  # the BPP tower placement (seed 004 section III-D)
     # under the key of one integrity-risk cell (studies.integrity_risk)

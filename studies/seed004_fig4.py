@@ -67,7 +67,7 @@ class Fig4HplMaps(SweepStudy):
     quick_sets = {"n_sops": "2,4,8", "sigma_ura_sop_m": "0.5,1,2,5,10,15,20,25"}
     nav_file = c.NAV_FILE
     axis_names = ("n_sops", "p_s_sop", "sigma_ura_sop_m")
-    key_axes = ()  # common random numbers across every cell (seed004_common)
+    key_axes = ()  # common random numbers across every cell (studies.common.seed004)
     params = {
         "n_sops": Param((2, 3, 4, 5, 6, 8), axis(count(1, 16)),
                           "SOPs in one SOP constellation, a panel each (seed 004 Fig. 4)"),

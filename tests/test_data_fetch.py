@@ -18,7 +18,7 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from oaraim import data
+from oaraim import cli, data
 from oaraim.cli import app
 from oaraim.registry import STUDIES
 from oaraim.studies.base import Study, StudyResult
@@ -163,7 +163,9 @@ def test_folder_without_the_file_names_folder_and_fix(tmp_path, monkeypatch):
 def test_cli_data_list_and_fetch(shared_data, serve, cache, monkeypatch):
     url, srv = serve(shared_data)
     monkeypatch.setenv("OARAIM_DATA", url)
-    monkeypatch.setenv("COLUMNS", "250")
+    # rows unwrapped: the CLI's console reads the width once, when oaraim.cli is imported, from
+    # COLUMNS or the terminal, which a pytest worker may not have
+    monkeypatch.setattr(cli.out, "width", 250)
     r = runner.invoke(app, ["data", "list"], catch_exceptions=False)
     assert r.exit_code == 0
     row = next(ln for ln in r.output.splitlines() if SMALL in ln)

@@ -16,6 +16,9 @@ with ``ast`` and imports nothing, so it also runs on a tree that does not import
   import still ties the two modules together. ``import oaraim.x`` makes the importing module
   depend on ``oaraim/x`` only; the package ``__init__`` modules that just re-export are edges
   like any other.
+- A *layer violation* is an import between layers that ``LAYERS`` does not allow (the table
+  docs/design.md draws): each module belongs to one layer (``layer_of``), and a layer may import
+  itself and the layers listed for it, nothing else.
 - The *largest file* is counted in lines; the rule is at most ``MAX_LINES``.
 """
 
@@ -31,6 +34,37 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: the largest package file allowed, in lines (issue 26)
 MAX_LINES = 700
+
+#: layer -> the layers it may import (besides itself); docs/design.md draws this table
+LAYERS = {
+    "root": {"constants", "config"},            # oaraim/__init__, the compilation cache
+    "constants": set(),                         # oaraim.constants: every physical constant
+    "config": set(),                            # oaraim.config: settings read by several layers
+    "oracles": set(),                           # oaraim.reference*: NumPy/SciPy only
+    "geometry": {"constants"},
+    "araim": {"geometry", "constants", "config"},
+    "mc": {"config"},
+    "sim": {"araim", "geometry", "constants"},
+    "data": {"geometry"},                       # oaraim.data: the real files, checked
+    "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config"},
+    "app": {"studies", "araim", "geometry", "mc", "sim", "data", "constants", "config",
+            "oracles"},                         # cli, execute, registry, report, bench
+}
+_SUBPACKAGE_LAYERS = ("geometry", "araim", "mc", "sim", "studies")
+
+
+def layer_of(module: str) -> str:
+    """The layer of a dotted module name of the package (``oaraim.araim.mhss`` -> "araim")."""
+    parts = module.split(".")
+    if len(parts) == 1 or parts[1] == "_compile_cache":
+        return "root"
+    if parts[1] in _SUBPACKAGE_LAYERS:
+        return parts[1]
+    if parts[1] in ("constants", "config", "data"):
+        return parts[1]
+    if parts[1].startswith("reference"):
+        return "oracles"
+    return "app"
 
 
 def package_dirs(root: Path = ROOT) -> dict[str, Path]:
@@ -173,11 +207,17 @@ def report(root: Path = ROOT) -> dict:
     """The numbers: private cross-file imports, cycles, the largest files."""
     edges, private, sizes = scan(root)
     cyc = cycles(edges)
+    layers = sorted(
+        f"{a} ({layer_of(a)}) imports {b} ({layer_of(b)})"
+        for a, bs in edges.items() for b in bs
+        if layer_of(a) != layer_of(b) and layer_of(b) not in LAYERS.get(layer_of(a), ())
+        and layer_of(b) != "root")
     largest = sorted(sizes.items(), key=lambda kv: -kv[1])
     return {
         "modules": len(sizes),
         "private_imports": [f"{m}:{line}: {text}" for m, line, text in private],
         "cycles": cyc,
+        "layer_violations": layers,
         "largest": [[m, n] for m, n in largest[:10]],
         "over_max_lines": [[m, n] for m, n in largest if n > MAX_LINES],
         "max_lines": MAX_LINES,
@@ -199,10 +239,14 @@ def main(argv=None) -> int:
         print(f"import cycles (lazy imports counted): {len(rep['cycles'])}")
         for comp in rep["cycles"]:
             print(f"  {len(comp)} modules: " + " ".join(comp))
+        print(f"layer violations: {len(rep['layer_violations'])}")
+        for line in rep["layer_violations"]:
+            print("  " + line)
         print(f"files above {MAX_LINES} lines: {len(rep['over_max_lines'])}")
         for m, n in rep["over_max_lines"]:
             print(f"  {m}: {n}")
-    broken = rep["private_imports"] or rep["cycles"] or rep["over_max_lines"]
+    broken = (rep["private_imports"] or rep["cycles"] or rep["layer_violations"]
+              or rep["over_max_lines"])
     return 1 if broken else 0
 
 

@@ -1,0 +1,67 @@
+"""The structure check (tools/structure.py): the rules of docs/design.md's "Layers" hold."""
+
+import importlib.util
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def structure():
+    spec = importlib.util.spec_from_file_location("structure", ROOT / "tools" / "structure.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def rep(structure):
+    return structure.report()
+
+
+def test_no_private_name_crosses_a_file(rep):
+    assert rep["private_imports"] == []
+
+
+def test_no_import_cycle_with_lazy_imports_counted(rep):
+    assert rep["cycles"] == []
+
+
+def test_every_import_follows_the_layers(rep, structure):
+    """docs/design.md's layer table: e.g. araim never imports sim, mc or studies."""
+    assert rep["layer_violations"] == []
+    assert structure.layer_of("oaraim.araim.mhss.root") == "araim"
+    assert structure.layer_of("oaraim.cli") == "app"
+    assert structure.layer_of("oaraim.reference_mhss") == "oracles"
+    assert "sim" not in structure.LAYERS["araim"] and "studies" not in structure.LAYERS["sim"]
+
+
+def test_no_package_file_above_the_line_limit(rep):
+    assert rep["over_max_lines"] == [], f"files above {rep['max_lines']} lines"
+
+
+def test_the_check_finds_what_it_looks_for(structure, tmp_path):
+    """On a made-up tree: a private import, a lazy-import cycle and a long file are all found,
+    and a package __init__ gathering its own private module is not a violation."""
+    (tmp_path / "pyproject.toml").write_text(textwrap.dedent("""
+        [tool.setuptools.package-dir]
+        "pkg" = "pkg"
+        "pkg.sub" = "sub"
+    """))
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("from pkg._impl import thing\n")
+    (tmp_path / "pkg" / "_impl.py").write_text("thing = 1\n")
+    (tmp_path / "pkg" / "a.py").write_text(
+        "from pkg.sub import b\n\ndef f():\n    return b._hidden\n")
+    (tmp_path / "sub" / "__init__.py").write_text("")
+    (tmp_path / "sub" / "b.py").write_text(
+        "def g():\n    from pkg import a  # lazy, still an edge\n    return a\n"
+        + "x = 0\n" * (structure.MAX_LINES + 1))
+    rep = structure.report(tmp_path)
+    assert rep["private_imports"] == ["pkg.a:4: b._hidden"]
+    assert rep["cycles"] == [["pkg.a", "pkg.sub.b"]]
+    assert [m for m, _ in rep["over_max_lines"]] == ["pkg.sub.b"]
