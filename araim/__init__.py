@@ -1,7 +1,14 @@
 """What a receiver computes from one epoch: WNLS, chi-square RAIM slopes and HPL, and the
 ARAIM / OARAIM multiple-hypothesis solution-separation protection levels with FDE.
 
-Pure JAX functions, batch first, float64. Failures are data: ``inf`` with a ``Status``.
+Pure JAX functions, batch first, float64. Failures are data: ``inf`` with a ``Status``. Each
+receiver function comes twice: a host function (``protection_levels``, ``solution_separation``,
+``detect_and_exclude``, ``slopes``, ``slope_hpl``, ``wnls``: NumPy input, argument checks with
+clear errors, batch-size buckets, host threads) and the jit-safe kernel it runs
+(``protection_levels_kernel``, ``separation_kernel``, ``detect_and_exclude_kernel``,
+``slopes_kernel``, ``slope_hpl_kernel``, ``wnls_kernel``), callable inside ``jax.jit`` and
+``jax.vmap``, inputs as a ``Sources`` pytree for the MHSS kernels, bad inputs returned as
+``Status.INVALID_INPUT``.
 """
 
 if __name__ != "oaraim.araim":  # the source folder is importable from the checkout's root
@@ -19,12 +26,19 @@ from oaraim.araim.budget import (
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table, noncentrality
 from oaraim.araim.fault_modes import CONVENTIONS as FAULT_MODE_CONVENTIONS
 from oaraim.araim.fault_modes import FaultModeRule
-from oaraim.araim.fde import FDEResult, Separation, detect_and_exclude, solution_separation
-from oaraim.araim.mhss import MHSSResult, protection_levels
+from oaraim.araim.fde import (
+    FDEResult,
+    Separation,
+    detect_and_exclude,
+    detect_and_exclude_kernel,
+    separation_kernel,
+    solution_separation,
+)
+from oaraim.araim.mhss import MHSSResult, Sources, protection_levels, protection_levels_kernel
 from oaraim.araim.position_opt import PositionOptimization
-from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slopes
+from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slope_hpl_kernel, slopes, slopes_kernel
 from oaraim.araim.status import Status
-from oaraim.araim.wnls import WNLSResult, wnls
+from oaraim.araim.wnls import WNLSResult, wnls, wnls_kernel
 
 __all__ = [
     "BUDGET_LPV200",
@@ -37,10 +51,14 @@ __all__ = [
     "MHSSResult",
     "PositionOptimization",
     "Separation",
+    "Sources",
     "detect_and_exclude",
+    "detect_and_exclude_kernel",
     "error_models",
     "exposure_probability",
     "protection_levels",
+    "protection_levels_kernel",
+    "separation_kernel",
     "solution_separation",
     "SlopeHPL",
     "Slopes",
@@ -50,8 +68,11 @@ __all__ = [
     "lambda_det_table",
     "noncentrality",
     "slope_hpl",
+    "slope_hpl_kernel",
     "slopes",
+    "slopes_kernel",
     "wnls",
+    "wnls_kernel",
 ]
 
 from oaraim.araim import ekf, ekf_raim

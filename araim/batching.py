@@ -1,20 +1,14 @@
 """Run a batch kernel chunk by chunk so its intermediates stay in cache.
 
-The MHSS kernel holds a few (modes x sources) arrays per geometry; over a batch of 65,536 each
-is ~100 MB and the kernel becomes memory-bound (measured: 23k PL/s unchunked, 80k PL/s in
-chunks of 1024, 9 GPS + 4 SOPs, 2 cores). ``lax.map`` over fixed-size chunks keeps every
-intermediate small. With an older, ~5x slower kernel, chunks of 64 / 128 / 256 / 1024 / 4096
-gave 118k / 146-188k / 154-159k / 129-133k / 132k PL/s and 256 was the steadiest; with the
-current kernel the chunk's traffic weighs more (measured on 2 host threads, interleaved in one
-process, median of 9 rounds): 829k PL/s at 128 against 787k at 256 for the bench case (9 GPS +
-4 SOPs, order 1), 157k against 147k for 8 SOPs at P_s^S = 1e-2 (order 2, Fig. 4's heaviest
-cells); 64 equals 128 (766k / 768k), 512 and above are slower (one core: 2.25 / 2.55 / 2.73
-CPU-us per PL at 256 / 512 / 1024). A (modes x 3 x sources) array of the bench case is 0.6 MB
-per chunk of 128, a third of a core's 2 MB L2. Batches larger than one chunk are computed in
-chunks of exactly this shape, so there a geometry's result does not depend on the caller's
-batch size (XLA rounds differently at different shapes); a batch of at most one chunk runs at
-its own shape. Every geometry is computed independently and the padding geometries are
-dropped, so changing ``CHUNK`` moves results only by rounding (last bits), never by more.
+The MHSS kernel holds a few (modes x sources) arrays per geometry; over a large batch each is
+hundreds of MB and the kernel becomes memory-bound. ``lax.map`` over fixed-size chunks of
+``CHUNK`` geometries keeps every intermediate small (a (modes x 3 x sources) array of the
+bench case is 0.6 MB per chunk of 128, a third of a core's 2 MB L2; the chunk sizes measured
+are in docs/benchmarks.md). Batches larger than one chunk are computed in chunks of exactly
+this shape, so there a geometry's result does not depend on the caller's batch size (XLA
+rounds differently at different shapes); a batch of at most one chunk runs at its own shape.
+Every geometry is computed independently and the padding geometries are dropped, so changing
+``CHUNK`` moves results only by rounding (last bits), never by more.
 """
 
 import concurrent.futures
@@ -29,20 +23,18 @@ import numpy as np
 from oaraim.config import default_threads
 
 #: XLA options of every jit that holds the MHSS kernel (``jit_kernel``): prefer 512-bit vectors.
-#: XLA:CPU prefers 256-bit vectors by default, also on AVX-512 processors; this project's
-#: machines are Sapphire Rapids (AVX-512). Measured with 9 GPS + 4 SOPs, batch 65,536,
-#: interleaved in one process (8 rounds, best of 3 each): 2 host threads 458-463k PL/s (median)
-#: against 395-407k with 256 (+13-16 %); one core (taskset) 2.9-3.1 against 3.4-3.5 CPU-us per
-#: PL. Every output bit-identical (elementwise IEEE operations give the same lanes at any
-#: width; no reduction here runs across the vectorised batch axis): tested on the bench case
-#: (tests/test_mhss.py), checked once on the 2000 random geometries of that file at orders 1-3
-#: and on the FDE outputs. On a processor without AVX-512 LLVM uses the widest vectors it has;
-#: other backends ignore the option. Other kernels (slopes, EKF, sky) are not measured with it
-#: and keep XLA's default.
+#: XLA:CPU prefers 256-bit vectors by default, also on AVX-512 processors (this project's
+#: machines); 512 bits are faster (docs/benchmarks.md) and every output is bit-identical
+#: (elementwise IEEE operations give the same lanes at any width; no reduction here runs across
+#: the vectorised batch axis; tested in tests/test_mhss.py). Without AVX-512 LLVM uses the
+#: widest vectors it has; other backends ignore the option. Other kernels (slopes, EKF, sky)
+#: keep XLA's default.
 KERNEL_COMPILER_OPTIONS = {"xla_cpu_prefer_vector_width": 512}
 
 
-def _traced(tree):
+def is_traced(tree):
+    """Whether any leaf of ``tree`` is a JAX tracer: the call is being traced under a caller's
+    ``jit`` or ``vmap`` (the kernels then run inline there, with no host work)."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
 
 
@@ -59,7 +51,7 @@ def jit_kernel(fn=None, **kwargs):
 
     @functools.wraps(fn)
     def call(*args, **kw):
-        return fn(*args, **kw) if _traced((args, kw)) else jitted(*args, **kw)
+        return fn(*args, **kw) if is_traced((args, kw)) else jitted(*args, **kw)
 
     call.jitted = jitted
     return call
@@ -176,7 +168,7 @@ def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK, part_fn=None
     """
     threads = default_threads() if threads is None else int(threads)
     n_chunks = -(-math.prod(batch_shape) // chunk)
-    traced = _traced(arrays)
+    traced = is_traced(arrays)
     if threads <= 1 or n_chunks < 2 * threads or traced:  # under a caller's jit: inline
         return fn(*arrays)
     per = -(-n_chunks // threads) * chunk  # geometries per part, whole chunks

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import _traced, bucket, jit_kernel, pad_rows, unpad
+from oaraim.araim.batching import bucket, is_traced, jit_kernel, pad_rows, unpad
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
@@ -34,10 +34,11 @@ from oaraim.araim.fault_modes import (
 from oaraim.araim.mhss import (
     PL_ITERATIONS,
     MHSSResult,
-    _batch_last_inputs,
-    _pls_from_projection,
-    _project,
+    Sources,
+    batch_last_inputs,
+    pls_from_projection,
     prepare_inputs,
+    project,
     required_order,
 )
 from oaraim.araim.status import Status
@@ -45,31 +46,52 @@ from oaraim.araim.validate import batch_source, check_int
 
 
 class Separation(NamedTuple):
-    separation_m: jax.Array  # (..., K, 3) Delta x_q^(i), ENU (mode 0: zeros)
-    threshold_m: jax.Array  # (..., K, 3) T_i,q
-    tau: jax.Array  # (..., K, 3) eq. (13); 0 where mode not monitored or T = separation = 0
-    monitored: jax.Array  # (..., K)
-    excluded: jax.Array  # (..., K, L) sources hypothesised faulty per mode
-    prior: jax.Array  # (..., K)
-    detected: jax.Array  # (...) any tau > 1
-    position_m: jax.Array  # (..., 3) all-in-view correction S^(0) y, ENU
-    pl: MHSSResult  # all-in-view protection levels
+    """The solution-separation test of ``solution_separation`` and ``separation_kernel``, per
+    fault mode (axis K, mode 0 the all-in-view solution) and direction (east, north, up)."""
+
+    separation_m: jax.Array
+    """(..., K, 3) Delta x_q^(i), ENU (mode 0: zeros)."""
+    threshold_m: jax.Array
+    """(..., K, 3) T_i,q, eq. (12)."""
+    tau: jax.Array
+    """(..., K, 3) eq. (13); 0 where the mode is not monitored or T = separation = 0."""
+    monitored: jax.Array
+    """(..., K) bool: the mode is monitored."""
+    excluded: jax.Array
+    """(..., K, L) bool: sources hypothesised faulty per mode."""
+    prior: jax.Array
+    """(..., K) P_f^(i) of the monitored modes, 0 otherwise."""
+    detected: jax.Array
+    """(...) bool: any tau > 1."""
+    position_m: jax.Array
+    """(..., 3) all-in-view correction S^(0) y, ENU."""
+    pl: MHSSResult
+    """The all-in-view protection levels."""
 
 
 class FDEResult(NamedTuple):
-    detected: jax.Array  # (...) all-in-view test failed
-    excluded: jax.Array  # (..., L) sources excluded (none when nothing was detected)
-    exclusion_mode: jax.Array  # (...) index of the excluded mode (K axis), -1 if none
-    tau: jax.Array  # (..., K, 3) all-in-view test coefficients
-    position_m: jax.Array  # (..., 3) correction of the solution kept (after exclusion), ENU
-    pl: MHSSResult  # PLs of the solution kept; status EXCLUSION_FAILED (inf) if none passes
-    status: jax.Array  # (...)
+    """Detection and exclusion of ``detect_and_exclude`` and ``detect_and_exclude_kernel``."""
+
+    detected: jax.Array
+    """(...) bool: the all-in-view test failed."""
+    excluded: jax.Array
+    """(..., L) bool: sources excluded (none when nothing was detected)."""
+    exclusion_mode: jax.Array
+    """(...) index of the excluded mode (K axis), -1 if none."""
+    tau: jax.Array
+    """(..., K, 3) the all-in-view test coefficients."""
+    position_m: jax.Array
+    """(..., 3) correction of the solution kept (after exclusion), ENU."""
+    pl: MHSSResult
+    """PLs of the solution kept; status EXCLUSION_FAILED (inf) if no candidate passes."""
+    status: jax.Array
+    """(...) ``araim.Status`` of the solution kept."""
 
 
 def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
                      budget, max_order, weighting, iterations, fault_modes=DEFAULT_RULE):
-    args = _batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    pr = _project(*args, budget, max_order, weighting, fault_modes=fault_modes)
+    args = batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
+    pr = project(*args, budget, max_order, weighting, fault_modes=fault_modes)
     yl = to_batch_last(y, 1)  # (L, B)
     y_ok = jnp.isfinite(yl) | ~args[7]
     # a non-finite residual of a valid source: nothing claimed (no detection, no exclusion)
@@ -82,7 +104,7 @@ def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, 
     tau = jnp.where(pr.threshold > 0, jnp.abs(sep) / jnp.where(pr.threshold > 0,
                                                               pr.threshold, 1.0), 0.0)
     detected = jnp.any(tau > 1.0, axis=(0, 1)) & (pr.status == Status.OK)
-    pl, status, emt = _pls_from_projection(pr, budget, iterations)
+    pl, status, emt = pls_from_projection(pr, budget, iterations)
     ok = status == Status.OK
     res = MHSSResult(jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), pl[2], emt,
                      jnp.where(ok, pr.sigma_acc_u, jnp.inf), pr.n_modes, pr.p_not_monitored,
@@ -96,6 +118,7 @@ def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, 
 
 
 def _flatten(arrays, batch):
+    """The arrays with their batch axes ``batch`` flattened into one."""
     return [x.reshape((-1,) + x.shape[len(batch):]) for x in arrays]
 
 
@@ -112,8 +135,11 @@ def _separation(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid
     return jax.tree.map(lambda x: x.reshape(batch + x.shape[1:]), out)
 
 
-def _wsse(g, constellation, var_int, valid, y, n_constellations):
-    """Weighted SSE of the least-squares fit of y on the valid rows (clock per constellation)."""
+def weighted_sse(g, constellation, var_int, valid, y, n_constellations):
+    """Weighted sum of squared residuals (weights C_int^-1) of the least-squares fit of y on the
+    valid rows, one clock per constellation: the score by which ``detect_and_exclude`` picks
+    among acceptable candidate subsets. JAX, batch first: g (..., L, 3), the others (..., L),
+    ``n_constellations`` static; inf where the fit is singular."""
     C = n_constellations
     g = jnp.where(valid[..., None], g, 0.0)
     w = linalg.inverse_variance_weights(jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid)
@@ -146,7 +172,7 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
     sub = _separation(bc(g), bc(constellation), bc(var_int), bc(var_acc), bc(b_nom), bc(p_sat),
                       bc(p_const), cand_valid, bc(y), budget, max_order, weighting, iterations,
                       fault_modes)
-    wsse = _wsse(bc(g), bc(constellation), bc(var_int), cand_valid, bc(y), p_const.shape[-1])
+    wsse = weighted_sse(bc(g), bc(constellation), bc(var_int), cand_valid, bc(y), p_const.shape[-1])
     candidate = jnp.moveaxis(top.monitored, -1, 0)  # (K, ...)
     acceptable = candidate & ~sub.detected & (sub.pl.status == Status.OK)
     score = jnp.where(acceptable, wsse, jnp.inf)
@@ -179,6 +205,60 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
     position = jnp.where((top.pl.status == Status.INVALID_INPUT)[..., None], jnp.inf, position)
     mode = jnp.where(detected & found, best, -1)
     return FDEResult(detected, excluded, mode, top.tau, position, pl, pl.status)
+
+
+def _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
+                 iterations):
+    """The static arguments of the public kernels, checked (ValueError before any tracing)."""
+    if not isinstance(budget, IntegrityBudget):
+        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
+                         "araim.BUDGET_SEED004_TABLE_I")
+    if all_in_view_weighting not in ("int", "acc"):
+        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
+                         f"got {all_in_view_weighting!r}")
+    rule = fault_mode_rule(fault_modes)
+    s = Sources(*sources)
+    args = (s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat, p_const,
+            s.valid)
+    return args, dict(budget=budget, max_order=check_order(rule, check_int("max_order",
+                                                                            max_order, 1)),
+                      weighting=all_in_view_weighting,
+                      iterations=check_int("iterations", iterations, 1), fault_modes=rule)
+
+
+def separation_kernel(sources: Sources, p_const, budget: IntegrityBudget, residual_m, *,
+                      max_order, all_in_view_weighting="int", fault_modes=None,
+                      iterations=PL_ITERATIONS) -> Separation:
+    """The solution-separation test of ``solution_separation`` as a pure JAX function:
+    callable inside ``jax.jit`` and ``jax.vmap`` (inline there), jitted on its own otherwise.
+
+    Args:
+      sources: ``araim.mhss.Sources`` of batch shape (...) and L sources.
+      p_const: (..., C) P_const per constellation.
+      budget: ``IntegrityBudget`` (static).
+      residual_m: (..., L) y = z - z_hat at the all-in-view linearisation point (metres).
+      max_order: the template order (static int >= 1).
+      all_in_view_weighting, fault_modes: as ``protection_levels`` (static).
+      iterations: the iteration bound of the bracketed PL solver (static).
+
+    Returns:
+      ``Separation``. A non-finite residual or an unusable input of a valid source gives
+      ``pl.status`` INVALID_INPUT (no detection); nothing raises inside the trace.
+    """
+    args, static = _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting,
+                                fault_modes, iterations)
+    return _separation(*args, residual_m, **static)
+
+
+def detect_and_exclude_kernel(sources: Sources, p_const, budget: IntegrityBudget, residual_m,
+                              *, max_order, all_in_view_weighting="int", fault_modes=None,
+                              iterations=PL_ITERATIONS) -> FDEResult:
+    """Detection and exclusion of ``detect_and_exclude`` as a pure JAX function, arguments as
+    ``separation_kernel``. Returns ``FDEResult``; failures as data (EXCLUSION_FAILED,
+    INVALID_INPUT with infinite PLs and position), never raised inside the trace."""
+    args, static = _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting,
+                                fault_modes, iterations)
+    return _detect_and_exclude(*args, residual_m, **static)
 
 
 def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
@@ -220,7 +300,7 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
                          "the epoch)")
     static = dict(budget=budget, max_order=max_order, weighting=all_in_view_weighting,
                   fault_modes=rule)
-    if bad is None or _traced(args):
+    if bad is None or is_traced(args):
         return fn(*args, y, **static)
     # padded to a bucket size (araim.batching.bucket): a handful of compiled shapes
     batch = args[0].shape[:-2]

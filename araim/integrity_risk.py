@@ -41,19 +41,10 @@ against the allocation of the PL equations, PHMI (1 - P_NM / (PHMI_V + PHMI_H)) 
 over the magnitude grid stands for the supremum over A; faults not monitored (P_NM) are charged
 to P_thresh by the PL equation and are reported, not summed.
 
-**Importance sampling.** eps = sigma z with z ~ N(0, I). The proposal is N(mu, I) (a symmetric
-mixture of N(+mu, I) and N(-mu, I) when the fault is zero), mixed with a share ``DEFENSIVE`` of
-N(0, I) itself so that the likelihood ratio stays bounded. The start mu is the minimum-norm
-shift that puts the mean error along u on the PL and brings the mean separation of the
-scenario's own mode back to its threshold (the dominant point of the MD event when the other
-monitors do not bind); ``ce_rounds`` rounds of the cross-entropy method (multilevel, elite
-fraction ``CE_ELITE``, mean-only update, Rubinstein and Kroese 2004) then move mu toward the
-region where every monitor passes. Weights w = phi(z) / q(z); the estimate is the mean of
-w 1{HMI} with its standard error; with no hit the 95 % upper bound is 3 / n sup w (rule of
-three on the proposal, sup w = min(exp(|mu|^2 / 2), 1 / DEFENSIVE)). The shift aims at the
-missed-detection event; wrong exclusions are estimated from the same samples, unbiased, with
-standard errors that are honest (bounded weights) but larger. Crude Monte Carlo is the same
-code with mu = 0 and no rounds.
+**Importance sampling** (docs/integrity-risk.md): eps = sigma z, z ~ N(0, I), proposal N(mu, I)
+(a symmetric pair fault-free) mixed with a share ``DEFENSIVE`` of N(0, I); mu starts at the
+minimum-norm shift onto the missed-detection event and ``ce_rounds`` cross-entropy rounds
+(elite ``CE_ELITE``) move it. Crude Monte Carlo is the same code with mu = 0 and no rounds.
 """
 
 from functools import partial
@@ -71,7 +62,8 @@ from oaraim.araim.fault_modes import (
     to_batch_first,
     to_batch_last,
 )
-from oaraim.araim.fde import _separation, _wsse, checked_inputs
+from oaraim.araim.fde import checked_inputs, separation_kernel, weighted_sse
+from oaraim.araim.mhss import Sources
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 
@@ -174,8 +166,9 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
     keep = valid[..., None, :] & ~excluded
     K = keep.shape[-2]
     cargs = _add_unit_axis(args, K, _TAILS)[:-1] + [keep]
-    sub = _separation(*_add_unit_axis(cargs, L, _TAILS), jnp.broadcast_to(
-        eye, keep.shape[:-1] + (L, L)), budget, max_order, weighting,
+    a = _add_unit_axis(cargs, L, _TAILS)
+    sub = separation_kernel(Sources(*a[:6], a[7]), a[6], budget, jnp.broadcast_to(
+        eye, keep.shape[:-1] + (L, L)), max_order=max_order, all_in_view_weighting=weighting,
         fault_modes=fault_modes)
     top = jax.tree.map(lambda x: x[(Ellipsis, 0) + (slice(None),) * (x.ndim - valid.ndim)],
                        sub)  # candidate 0: (..., L units, ...)
@@ -197,7 +190,8 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
         bc = lambda x, t: jnp.broadcast_to(  # noqa: E731
             x[(...,) + (None,) * len(extra) + (slice(None),) * t],
             keep.shape[:-1] + extra + x.shape[x.ndim - t:])
-        return _wsse(bc(gk, 2), bc(ck, 1), bc(vk, 1), bc(keep, 1), jnp.broadcast_to(y, shape), C)
+        return weighted_sse(bc(gk, 2), bc(ck, 1), bc(vk, 1), bc(keep, 1),
+                            jnp.broadcast_to(y, shape), C)
 
     q1 = q(eye, (L,))  # (..., K, L)
     q2 = q(pairs, (L, L))  # (..., K, L, L)

@@ -20,9 +20,14 @@ import numpy as np
 from oaraim.araim import linalg
 from oaraim.araim.batching import map_chunks
 from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.mhss import _unit_norm
 from oaraim.araim.status import Status
-from oaraim.araim.validate import check_probability, check_sigma, check_unit_rows, host_values
+from oaraim.araim.validate import (
+    check_probability,
+    check_sigma,
+    check_unit_rows,
+    host_values,
+    unit_norm,
+)
 
 N_STATES = 4  # east, north, up, receiver clock
 
@@ -32,19 +37,34 @@ REDUNDANCY_TOLERANCE = 1e-9
 
 
 class Slopes(NamedTuple):
-    slopes: jax.Array  # (..., L) slope_i in metres of horizontal error per unit sqrt(lambda)
-    slope_max: jax.Array  # (...)
-    dof: jax.Array  # (...) int: n_valid - 4
-    status: jax.Array  # (...) int8 Status
+    """The RAIM slopes of ``slopes`` and ``slopes_kernel``."""
+
+    slopes: jax.Array
+    """(..., L) slope_i in metres of horizontal error per unit sqrt(lambda); 0 for invalid
+    sources, inf where the status is not OK."""
+    slope_max: jax.Array
+    """(...) the largest slope; inf where the status is not OK."""
+    dof: jax.Array
+    """(...) int: degrees of freedom of the residuals, n_valid - 4."""
+    status: jax.Array
+    """(...) int8 ``araim.Status``."""
 
 
 class SlopeHPL(NamedTuple):
-    hpl_m: jax.Array  # (...) inf where status != OK
-    slope_max: jax.Array  # (...)
-    slopes: jax.Array  # (..., L)
-    lambda_det: jax.Array  # (...) non-centrality used (depends on dof)
-    dof: jax.Array  # (...)
-    status: jax.Array  # (...)
+    """The slope HPL of ``slope_hpl`` and ``slope_hpl_kernel``."""
+
+    hpl_m: jax.Array
+    """(...) HPL = slope_max sqrt(lambda_det); inf where status != OK."""
+    slope_max: jax.Array
+    """(...) the largest slope."""
+    slopes: jax.Array
+    """(..., L) every source's slope."""
+    lambda_det: jax.Array
+    """(...) the non-centrality used (depends on dof); inf where status != OK."""
+    dof: jax.Array
+    """(...) degrees of freedom, n_valid - 4."""
+    status: jax.Array
+    """(...) int8 ``araim.Status``."""
 
 
 def _prepare(g, sigma_m, valid):
@@ -66,11 +86,16 @@ def _invalid_input(g, sigma_m, valid):
     """(...) bool: a valid source has a non-finite or non-unit row (``mhss.UNIT_ROW_TOLERANCE``)
     or a sigma that is not finite and > 0. Such a geometry gets ``Status.INVALID_INPUT``."""
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
-    ok = _unit_norm(gx * gx + gy * gy + gz * gz) & (sigma_m > 0) & (sigma_m < jnp.inf)
+    ok = unit_norm(gx * gx + gy * gy + gz * gz) & (sigma_m > 0) & (sigma_m < jnp.inf)
     return jnp.any(valid & ~ok, axis=-1)
 
 
-def _slopes_kernel(g, sigma_m, valid):
+def slopes_kernel(g, sigma_m, valid) -> Slopes:
+    """The RAIM slopes of ``slopes`` as a pure JAX function of arrays of one batch shape: g
+    (..., L, 3), sigma_m and valid (..., L) (standard deviations in metres, bool). Callable
+    inside ``jax.jit`` and ``jax.vmap`` (one program, no chunking). A geometry with a
+    non-finite or non-unit row or a sigma that is not finite and > 0 at a valid source gets
+    ``Status.INVALID_INPUT`` and infinite slopes; nothing raises."""
     invalid = _invalid_input(g, sigma_m, valid)
     g, w = masked_geometry(g, sigma_m, valid)
     gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
@@ -96,7 +121,7 @@ def _slopes_kernel(g, sigma_m, valid):
     failed = status != Status.OK
     slopes = jnp.where(failed[..., None] & valid, jnp.inf, slopes)
     slope_max = jnp.where(failed, jnp.inf, jnp.max(slopes, axis=-1))
-    return slopes, slope_max, dof, status
+    return Slopes(slopes, slope_max, dof, status)
 
 
 #: geometries per chunk of the public ``slopes`` and ``slope_hpl`` (``araim.batching.map_chunks``).
@@ -110,25 +135,32 @@ SLOPE_CHUNK = 16384
 
 @jax.jit
 def _slopes_chunked(g, sigma_m, valid):
-    return map_chunks(lambda *xs: Slopes(*_slopes_kernel(*xs)), (g, sigma_m, valid),
+    return map_chunks(lambda *xs: slopes_kernel(*xs), (g, sigma_m, valid),
                       g.shape[:-2], chunk=SLOPE_CHUNK)
 
 
 def _slope_hpl_body(g, sigma_m, valid, lambda_table):
-    slopes, slope_max, dof, status = _slopes_kernel(g, sigma_m, valid)
+    """The slope HPL of ``slope_hpl`` as a jitted JAX function of arrays
+    of one batch shape (one program, no chunking; inline under a caller's ``jit`` or ``vmap``):
+    ``slope_hpl_kernel(g, sigma_m, valid, lambda_table) -> SlopeHPL`` with g (..., L, 3), sigma_m
+    (metres) and valid (..., L), and ``lambda_table`` the non-centralities by dof
+    (``araim.lambda_det_table(p_fa, p_md, max_dof)``). Bad inputs give ``Status.INVALID_INPUT``
+    and an infinite HPL, as ``slopes_kernel``."""
+    slopes, slope_max, dof, status = slopes_kernel(g, sigma_m, valid)
     lam = lambda_table[jnp.clip(dof, 0, lambda_table.shape[0] - 1)]
     ok = status == Status.OK
     hpl = jnp.where(ok, slope_max * jnp.sqrt(jnp.where(ok, lam, 1.0)), jnp.inf)
     return SlopeHPL(hpl, slope_max, slopes, jnp.where(ok, lam, jnp.inf), dof, status)
 
 
-_slope_hpl_jit = jax.jit(_slope_hpl_body)
+slope_hpl_kernel = jax.jit(_slope_hpl_body)
 
 
 @jax.jit
-def _slope_hpl_chunked(g, sigma_m, valid, lambda_table):
-    """``_slope_hpl_jit`` in chunks of ``SLOPE_CHUNK`` (batches of at most one chunk at their
-    own shape): what ``slope_hpl`` runs."""
+def slope_hpl_chunked(g, sigma_m, valid, lambda_table):
+    """``slope_hpl_kernel`` in chunks of ``SLOPE_CHUNK`` (batches of at most one chunk at their
+    own shape): what ``slope_hpl`` runs after its argument checks, and what ``oaraim bench``
+    times. Arguments and result as ``slope_hpl_kernel``."""
     return map_chunks(lambda *xs: _slope_hpl_body(*xs, lambda_table), (g, sigma_m, valid),
                       g.shape[:-2], chunk=SLOPE_CHUNK)
 
@@ -196,5 +228,5 @@ def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
     n_sources = g.shape[-2]
     table = lambda_det_table(p_fa, p_md, max(n_sources - N_STATES, 1))
-    return _named_invalid_input(_slope_hpl_chunked(g, sigma_m, valid, jnp.asarray(table)),
+    return _named_invalid_input(slope_hpl_chunked(g, sigma_m, valid, jnp.asarray(table)),
                                 g, sigma_m, valid)

@@ -86,16 +86,31 @@ def check_finite_sources(name: str, x, valid, what: str):
                          f"{np.asarray(value).tolist()!r} ({what}; or mark the source invalid)")
 
 
+#: a line-of-sight row of a valid source must have a Euclidean norm within this of 1 (rows
+#: printed to 4 decimals, as the ADD's Appendix D, are within 1e-4; a (0, 0, 0) row or an
+#: unnormalised vector is refused)
+UNIT_ROW_TOLERANCE = 1e-3
+
+
+def unit_norm(n2):
+    """Squared row norms n2 (NumPy or JAX) finite with the norm within ``UNIT_ROW_TOLERANCE``
+    of 1: (1 - tol)^2 <= n2 <= (1 + tol)^2 (no sqrt; NaN and inf fail). The one row test of
+    the receiver functions, on the host (``check_unit_rows``) and inside their kernels."""
+    return (n2 >= (1.0 - UNIT_ROW_TOLERANCE) ** 2) & (n2 <= (1.0 + UNIT_ROW_TOLERANCE) ** 2)
+
+
 def check_unit_rows(g, valid):
     """ValueError naming ``g``, the batch index and the source where the line-of-sight row of a
     valid source is not finite or its norm is not within ``UNIT_ROW_TOLERANCE`` of 1: the
-    check and the message of ``protection_levels`` (``mhss._check_inputs``), for the receiver
-    functions that take rows alone (``slopes``, ``slope_hpl``)."""
-    from oaraim.araim.mhss import UNIT_ROW_TOLERANCE, _unit_norm  # mhss imports this module
-
-    gn, v = np.asarray(g), np.asarray(valid, bool)
-    with np.errstate(invalid="ignore", over="ignore"):
-        bad = v & ~_unit_norm(np.einsum("...i,...i->...", gn, gn))
+    check and the message of every receiver function that takes rows (``protection_levels``,
+    ``solution_separation``, ``slopes``, ``slope_hpl``). NumPy on the host; rows of padding
+    sources may hold anything."""
+    gn = np.asarray(g)
+    with np.errstate(invalid="ignore", over="ignore"):  # NumPy: no compilation per shape
+        ok = unit_norm(np.einsum("...i,...i->...", gn, gn))
+    if ok.all():
+        return
+    bad = np.asarray(valid, bool) & ~ok
     if np.any(bad):
         raise ValueError(
             f"g (line-of-sight rows) of a valid source is not a unit vector at "

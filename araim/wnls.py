@@ -26,14 +26,24 @@ from oaraim.araim.validate import (
 
 
 class WNLSResult(NamedTuple):
-    position_m: jax.Array  # (..., 3) receiver position, the frame of the transmitter positions
-    clock_m: jax.Array  # (..., C) clock biases times c, metres
-    residual_m: jax.Array  # (..., L) z - h(x_hat); 0 for invalid sources
-    wsse: jax.Array  # (...) sum of weighted squared residuals: chi-square, dof = n - 3 - C
-    dof: jax.Array  # (...) n_valid - 3 - n_clocks_used
-    last_step_m: jax.Array  # (...) norm of the last Gauss-Newton step
-    covariance_m2: jax.Array  # (..., 3 + C, 3 + C) (H^T W H)^-1 at the solution
-    status: jax.Array  # (...) int8 Status
+    """The solution of ``wnls`` and ``wnls_kernel``."""
+
+    position_m: jax.Array
+    """(..., 3) receiver position, the frame of the transmitter positions."""
+    clock_m: jax.Array
+    """(..., C) clock biases times c, metres."""
+    residual_m: jax.Array
+    """(..., L) z - h(x_hat); 0 for invalid sources."""
+    wsse: jax.Array
+    """(...) sum of weighted squared residuals: chi-square, dof = n - 3 - C."""
+    dof: jax.Array
+    """(...) n_valid - 3 - n_clocks_used."""
+    last_step_m: jax.Array
+    """(...) norm of the last Gauss-Newton step."""
+    covariance_m2: jax.Array
+    """(..., 3 + C, 3 + C) (H^T W H)^-1 at the solution."""
+    status: jax.Array
+    """(...) int8 Status."""
 
 
 def _design(x, tx_pos_m, clock_onehot):
@@ -123,6 +133,18 @@ def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m)
 _wnls_jit = jax.jit(_wnls_kernel, static_argnames=("n_clocks", "n_iter"))
 
 
+def wnls_kernel(pseudorange_m, tx_pos_m, sigma_m, x0_m, valid, clock_index, *, n_clocks=1,
+                n_iter=10, tol_m=1e-4) -> WNLSResult:
+    """The WNLS solution of ``wnls`` as a jitted JAX function of arrays already broadcast to
+    one batch shape (no host conversion or checks): callable inside ``jax.jit`` and
+    ``jax.vmap``. pseudorange_m, sigma_m, valid, clock_index ``(..., L)``; tx_pos_m
+    ``(..., L, 3)``; x0_m ``(..., 3 + n_clocks)``; n_clocks and n_iter static. An unusable
+    input of a valid source (or a non-finite x0_m) gives ``Status.INVALID_INPUT`` with
+    infinite outputs, never an exception inside the trace."""
+    return _wnls_jit(pseudorange_m, tx_pos_m, sigma_m, x0_m, valid, clock_index,
+                     n_clocks=int(n_clocks), n_iter=int(n_iter), tol_m=tol_m)
+
+
 def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=None,
          n_clocks=1, n_iter=10, tol_m=1e-4) -> WNLSResult:
     """Batched iterated WNLS position and clock solution (seed 001 section 2.4).
@@ -167,8 +189,8 @@ def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=No
         if x0.shape[-1] == 3:
             x0 = jnp.concatenate([x0, jnp.zeros(x0.shape[:-1] + (n_clocks,))], axis=-1)
         x0 = jnp.broadcast_to(x0, batch + (3 + n_clocks,))
-    res = _wnls_jit(pr, tx, sigma, x0, valid, clock_index, n_clocks=int(n_clocks),
-                    n_iter=int(n_iter), tol_m=tol_m)
+    res = wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks=n_clocks, n_iter=n_iter,
+                      tol_m=tol_m)
     host = host_values(res.status)
     if host is not None and np.any(host[0] == Status.INVALID_INPUT):
         _name_invalid_input(pr, tx, sigma, x0, valid, clock_index, int(n_clocks))

@@ -510,9 +510,14 @@ class Ephemeris:
                 f"unhealthy {[str(p) for p in self.prns[~self.sat_healthy]]})")
 
     @property
+    def toe_healthy_s(self):
+        """t_oe of every healthy record in the file, GPS seconds (1-D, sorted per satellite)."""
+        return self._toe_healthy[np.isfinite(self._toe_healthy)]
+
+    @property
     def record_span_s(self):
         """(first, last) t_oe over the file, GPS seconds."""
-        t = self._toe_healthy[np.isfinite(self._toe_healthy)]
+        t = self.toe_healthy_s
         return float(t.min()), float(t.max())
 
     def _select(self, prns):

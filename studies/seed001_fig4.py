@@ -24,7 +24,7 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import _slopes_kernel
+from oaraim.araim.slopes import slopes_kernel
 from oaraim.mc import EmpiricalCDF, Mean, run_chunked
 from oaraim.studies.base import (
     Param,
@@ -69,8 +69,8 @@ def fig4_kernel(keys, n_gps, n_added, mask_rad, sigma_gps_m, sigma_sop_m, d_min_
     sig_gnss = jnp.full(valid.shape, sigma_gps_m)
     sig_sop = jnp.concatenate([jnp.full(az.shape, sigma_gps_m),
                                jnp.full(az_s.shape, sigma_sop_m)], -1)
-    _, smax_gnss, _, st_gnss = _slopes_kernel(g_gnss, sig_gnss, valid)
-    _, smax_sop, _, st_sop = _slopes_kernel(g_sop, sig_sop, valid)
+    _, smax_gnss, _, st_gnss = slopes_kernel(g_gnss, sig_gnss, valid)
+    _, smax_sop, _, st_sop = slopes_kernel(g_sop, sig_sop, valid)
     return {"slope_max_gnss": smax_gnss, "slope_max_sop": smax_sop,
             "status_gnss": st_gnss, "status_sop": st_sop}
 

@@ -32,7 +32,7 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import _slope_hpl_jit
+from oaraim.araim.slopes import slope_hpl_kernel
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
     Param,
@@ -119,7 +119,7 @@ def fig5_kernel(keys, az_gps, el_gps, valid_gps, lambda_table, n_sops, sigma_gps
     e_n = keys.shape
     g_gps = geometry.geometry_rows(az_gps, el_gps)  # (E, L, 3)
     sig_gps = jnp.full(valid_gps.shape, sigma_gps_m)
-    hpl_gps = _slope_hpl_jit(g_gps, sig_gps, valid_gps, lambda_table).hpl_m
+    hpl_gps = slope_hpl_kernel(g_gps, sig_gps, valid_gps, lambda_table).hpl_m
     towers = jax.vmap(lambda k: geometry.bpp_towers(
         k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m))(keys.reshape(-1))  # one flat vmap
     g_sop = geometry.geometry_rows(towers.az_rad, towers.el_rad).reshape(*e_n, n_sops, 3)
@@ -128,7 +128,7 @@ def fig5_kernel(keys, az_gps, el_gps, valid_gps, lambda_table, n_sops, sigma_gps
                              jnp.ones((*e_n, n_sops), bool)], -1)
     sig = jnp.concatenate([jnp.full((*e_n, valid_gps.shape[1]), sigma_gps_m),
                            jnp.full((*e_n, n_sops), sigma_sop_m)], -1)
-    hpl_sop = _slope_hpl_jit(g, sig, valid, lambda_table).hpl_m
+    hpl_sop = slope_hpl_kernel(g, sig, valid, lambda_table).hpl_m
     return hpl_gps, hpl_sop
 
 

@@ -37,7 +37,8 @@ from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.fde import _separation
+from oaraim.araim.fde import separation_kernel
+from oaraim.araim.mhss import Sources
 from oaraim.araim.status import Status
 from oaraim.mc.sweep import Count, Max, Mean, Min
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, fault_modes_param
@@ -88,9 +89,9 @@ def draw(key, n_gps):
 
 
 def _sep(x, valid, fault_modes):
-    return _separation(x["g"], x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                       x["p_sat"], x["p_const"], valid, x["y"], budget=c.BUDGET, max_order=1,
-                       fault_modes=fault_mode_rule(fault_modes))
+    return separation_kernel(Sources(x["g"], x["constellation"], x["var_int"], x["var_acc"],
+                                     x["b_nom"], x["p_sat"], valid), x["p_const"], c.BUDGET,
+                             x["y"], max_order=1, fault_modes=fault_mode_rule(fault_modes))
 
 
 @functools.partial(jit_kernel, static_argnames=("fault_modes",))

@@ -45,12 +45,12 @@ def test_batches_of_one_bucket_share_one_program_and_bits(case):
     every geometry's outputs are the bits of the full 16-geometry batch (the padding repeats
     geometry 0 and is dropped; the kernel never mixes geometries)."""
     full = _pl(case, 16, max_order=1)
-    before = mhss._protection_levels_jit.jitted._cache_size()
+    before = mhss.kernel_cache_size()
     for n in (5, 9, 13, 16):
         got = _pl(case, n, max_order=1)
         for name, a, b in zip(got._fields, got, full, strict=True):
             assert a.shape[0] == n and np.array_equal(np.asarray(a), np.asarray(b)[:n]), name
-    assert mhss._protection_levels_jit.jitted._cache_size() - before <= 1
+    assert mhss.kernel_cache_size() - before <= 1
     two_d = araim.protection_levels(*(case[k][:12].reshape((3, 4) + case[k].shape[1:])
                                       for k in KEYS[:7]), BUDGET,
                                     case["valid"][:12].reshape(3, 4, -1), max_order=1,
@@ -89,7 +89,7 @@ def test_max_order_none_in_one_call_equals_the_explicit_order(case):
 
 @pytest.mark.parametrize("rule", ["grouped", "add-v4.2"])
 def test_order_flags_are_required_orders_test(rule):
-    """``_order_flags`` (the kernel's per-geometry 'needs more than order 1') against
+    """``higher_order_flags`` (the kernel's per-geometry 'needs more than order 1') against
     ``required_order`` of each geometry alone, on random batches spanning orders 1 and 2:
     random validity, labels over 3 constellations, P_s 1e-6..1e-2, P_const 1e-9..1e-3."""
     import jax
@@ -101,7 +101,7 @@ def test_order_flags_are_required_orders_test(rule):
     p_sat = 10.0 ** rng.uniform(-6, -2, (n, n_src))
     p_const = 10.0 ** rng.uniform(-9, -3, (n, n_const))
     r = fault_mode_rule(rule)
-    flags = np.asarray(jax.jit(mhss._order_flags, static_argnums=(4, 5, 6))(
+    flags = np.asarray(jax.jit(mhss.higher_order_flags, static_argnums=(4, 5, 6))(
         to_batch_last(valid, 1), to_batch_last(lab, 1), to_batch_last(p_sat, 1),
         to_batch_last(p_const, 1), BUDGET, r, 1))
     orders = np.array([mhss.required_order(valid[i:i + 1], lab[i:i + 1], p_sat[i:i + 1],

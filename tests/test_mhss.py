@@ -639,7 +639,7 @@ def test_bad_input_is_rejected_with_the_field_name():
 def test_input_checks_see_valid_sources_only(name, value, match):
     """The range checks, on the host (``prepare_inputs``: fast path on the minimum and maximum,
     masked test when that fails) and in the kernel (``protection_levels`` with ``max_order``
-    given: ``_input_flags``, then the host check for the message): a bad value at a valid
+    given: ``invalid_input_flags``, then the host check for the message): a bad value at a valid
     source raises naming its argument; the same value at a source marked invalid (padding,
     whatever it holds) is accepted, and the PLs are those of the clean batch."""
     from oaraim.araim.mhss import prepare_inputs
@@ -704,11 +704,11 @@ def test_root_finder_q_and_density_match_scipy():
     phi = exp(-t^2/2)/sqrt(2 pi) to 1e-15 plus the conditioning of exp at z = t^2/2 (an
     argument rounded by eps moves exp(-z) by z eps relative; both sides round z, twice:
     4 z eps), over t from -10 to 11 plus the branch point x = 1 (t = sqrt 2) from both sides."""
-    from oaraim.araim.mhss import _q_and_density, _q_and_density_fast
+    from oaraim.araim.mhss.root import q_and_density, q_and_density_fast
 
     t = np.concatenate([np.linspace(-10.0, 11.0, 20_001),
                         np.sqrt(2.0) + np.array([-1e-12, 0.0, 1e-12])])
-    q, phi = (np.asarray(a) for a in jax.jit(_q_and_density)(t))
+    q, phi = (np.asarray(a) for a in jax.jit(q_and_density)(t))
     q_ref = special.ndtr(-t)
     phi_ref = np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
     keep = q_ref > 1e-29
@@ -718,10 +718,10 @@ def test_root_finder_q_and_density_match_scipy():
     assert np.all(np.abs(phi / phi_ref - 1.0) < 1e-15 + 4.0 * z * np.finfo(float).eps)
     # the fast path's steps: one erfc branch for all x, Q within 1e-8 relative (measured
     # 9.8e-9 on [0, 1) for erfc, the largest near x = 0; Q(t < 0) = 1 - Q(-t) halves it)
-    q_fast, phi_fast = (np.asarray(a) for a in jax.jit(_q_and_density_fast)(t))
+    q_fast, phi_fast = (np.asarray(a) for a in jax.jit(q_and_density_fast)(t))
     assert np.max(np.abs(q_fast[keep] / q_ref[keep] - 1.0)) < 1e-8
     assert np.max(np.abs(q_fast[np.abs(t) >= np.sqrt(2.0)] / q[np.abs(t) >= np.sqrt(2.0)]
-                         - 1.0)) < 1e-15  # the same branch as _q_and_density there
+                         - 1.0)) < 1e-15  # the same branch as q_and_density there
     np.testing.assert_array_equal(phi_fast, phi)
 
 
@@ -771,19 +771,19 @@ def _roots(coef, mean, sd, rhs):
 
 
 def test_lower_slope_bound_holds_for_convex_and_concave_terms():
-    """The fast path's lower proof: R(x - delta) >= R(x) + delta Dl(x) (``_risk_lower_slope``)
+    """The fast path's lower proof: R(x - delta) >= R(x) + delta Dl(x) (``risk_lower_slope``)
     for terms convex, concave (t < 0) and mixed on [x - delta, x], with exact SciPy values;
-    Dl <= D = -R' (``_risk``, checked by central differences), and Dl = D where every term has
+    Dl <= D = -R' (``risk_sum``, checked by central differences), and Dl = D where every term has
     t >= e / 2."""
-    from oaraim.araim.mhss import _risk, _risk_lower_slope
+    from oaraim.araim.mhss.root import risk_lower_slope, risk_sum
 
     coef, mean, sd, rhs = _random_pl_terms(3, n=3000)
     rng = np.random.default_rng(4)
     x = rng.uniform(-20.0, 80.0, rhs.size)
     for delta in (1e-4, 1e-3, 0.5, 5.0):
-        r, dl = (np.asarray(a) for a in jax.jit(_risk_lower_slope)(
+        r, dl = (np.asarray(a) for a in jax.jit(risk_lower_slope)(
             x, delta, coef, mean, 1.0 / sd, coef / sd))
-        r_, d = (np.asarray(a) for a in jax.jit(_risk)(x, coef, mean, 1.0 / sd))
+        r_, d = (np.asarray(a) for a in jax.jit(risk_sum)(x, coef, mean, 1.0 / sd))
         np.testing.assert_allclose(r, r_, rtol=1e-14)
 
         def risk(y):
@@ -803,7 +803,7 @@ def test_halley_step_one_term_closed_form():
     """One term c Q((x - m)/s) = rhs has the root m + s Q^-1(rhs / c). Halley's method in z
     space converges cubically: from 0.6 m (0.3 s) below the root, 6.8e-4 m after one step,
     8.7e-13 m after two."""
-    from oaraim.araim.mhss import _halley_step, _risk_curvature
+    from oaraim.araim.mhss.root import halley_step, risk_curvature
 
     c, m, s = np.array([[1e-5]]), np.array([[3.0]]), np.array([[2.0]])
     rhs = np.array([1e-9])
@@ -811,7 +811,7 @@ def test_halley_step_one_term_closed_form():
     x = root - 0.3 * s[0]
     errors = []
     for _ in range(2):
-        x = np.asarray(_halley_step(x, *_risk_curvature(x, c, m, 1 / s, c / s, c / s**2),
+        x = np.asarray(halley_step(x, *risk_curvature(x, c, m, 1 / s, c / s, c / s**2),
                                     np.sqrt(-2 * np.log(rhs))))
         errors.append(abs(float(x[0] - root[0])))
     e0 = 0.3 * float(s[0, 0])
@@ -823,12 +823,17 @@ def test_halley_step_one_term_closed_form():
 
 def test_taylor_third_derivative_bound_holds():
     """``solve_pl``'s Taylor proof: |R'''(s)| <= ``TAYLOR_B3_FACTOR`` B3(x) at every s within h
-    of x where h max_j (1 / sd_j) <= ``TAYLOR_E_MAX`` (``_risk_taylor``), R''' in closed form
+    of x where h max_j (1 / sd_j) <= ``TAYLOR_E_MAX`` (``risk_taylor``), R''' in closed form
     (sum_j coef_j (1 - t^2) phi(t) / sd_j^3) at 41 points of the interval, for terms with t from
-    -45 to 45 (phi underflowing at either end); and its R, D, D2 are ``_risk_curvature``'s to
+    -45 to 45 (phi underflowing at either end); and its R, D, D2 are ``risk_curvature``'s to
     1e-8 (that one's approximate Q) and D, D2 exactly. The bound for both forms of the sums
     (terms written out, and one array over the terms, used beyond ``UNROLL_TERMS`` terms)."""
-    from oaraim.araim.mhss import TAYLOR_B3_FACTOR, TAYLOR_E_MAX, _risk_curvature, _risk_taylor
+    from oaraim.araim.mhss.root import (
+        TAYLOR_B3_FACTOR,
+        TAYLOR_E_MAX,
+        risk_curvature,
+        risk_taylor,
+    )
 
     coef, mean, sd, rhs = _random_pl_terms(5, n=3000, terms=12)
     rng = np.random.default_rng(6)
@@ -836,14 +841,14 @@ def test_taylor_third_derivative_bound_holds():
     mean = np.where(rng.random(mean.shape) < 0.5, x - sd * rng.uniform(-45, 45, mean.shape), mean)
     inv_sd = 1.0 / sd
     cw = coef * inv_sd
-    r_, d_, d2_ = (np.asarray(a) for a in jax.jit(_risk_curvature)(
+    r_, d_, d2_ = (np.asarray(a) for a in jax.jit(risk_curvature)(
         x, coef, mean, inv_sd, cw, cw * inv_sd))
     h = TAYLOR_E_MAX / np.max(np.where(coef > 0, inv_sd, 0.0), axis=0)
     thirds = [np.sum(coef * (1 - t**2) * stats.norm.pdf(t) * inv_sd**3, axis=0)
               for t in ((x + f * h - mean) * inv_sd for f in np.linspace(-1.0, 1.0, 41))]
     for unroll_terms in (64, 0):  # terms written out, and one array over the terms
         r, d, d2, b3 = (np.asarray(a) for a in jax.jit(
-            lambda *a, u=unroll_terms: _risk_taylor(*a, unroll_terms=u))(
+            lambda *a, u=unroll_terms: risk_taylor(*a, unroll_terms=u))(
             x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))
         if unroll_terms:  # (the other form agrees with this one to rounding: test below)
             np.testing.assert_allclose(r, r_, rtol=1e-8, atol=1e-300)
@@ -860,15 +865,15 @@ def test_risk_sums_unrolled_and_vectorised_agree():
     terms, for the rarely run parts of ``solve_pl`` and beyond ``UNROLL_TERMS`` terms, cheaper to
     compile) give the same R, D, lower slope, D2 and third-derivative bound to rounding
     (summation order only)."""
-    from oaraim.araim.mhss import _risk, _risk_lower_slope, _risk_taylor
+    from oaraim.araim.mhss.root import risk_lower_slope, risk_sum, risk_taylor
 
     coef, mean, sd, rhs = _random_pl_terms(3)
     x = mean.max(axis=0) + sd.max(axis=0)
     inv_sd = 1.0 / sd
     cw = coef * inv_sd
-    for f, args in ((_risk, (x, coef, mean, inv_sd)),
-                    (_risk_lower_slope, (x, 1e-4, coef, mean, inv_sd, cw)),
-                    (_risk_taylor, (x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))):
+    for f, args in ((risk_sum, (x, coef, mean, inv_sd)),
+                    (risk_lower_slope, (x, 1e-4, coef, mean, inv_sd, cw)),
+                    (risk_taylor, (x, coef, mean, inv_sd, cw, cw * inv_sd, cw * inv_sd**2))):
         unrolled = jax.jit(lambda *a, f=f: f(*a, unroll_terms=64))(*args)
         vectorised = jax.jit(lambda *a, f=f: f(*a, unroll_terms=0))(*args)
         for u, v in zip(unrolled, vectorised, strict=True):
@@ -884,6 +889,7 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     With one round allowed, the bracketed branch runs for the rest and still brackets the
     root; the bracketed solver alone agrees within 1e-3 m."""
     from oaraim.araim import mhss
+    from oaraim.araim.mhss import root as root_finder
 
     coef, mean, sd, rhs = _random_pl_terms(11)
     root = _roots(coef, mean, sd, rhs)
@@ -893,8 +899,8 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
             return jnp.full(rhs.shape, jnp.nan), jnp.zeros(rhs.shape, bool)
         with pytest.MonkeyPatch.context() as mp:
             if not bracketed:
-                mp.setattr(mhss, "_solve_pl_bracketed", no_bracketed)
-            mp.setattr(mhss, "FAST_EXTRA_ROUNDS", rounds)
+                mp.setattr(root_finder, "solve_pl_bracketed", no_bracketed)
+            mp.setattr(root_finder, "FAST_EXTRA_ROUNDS", rounds)
             # a new function each time: jit's cache would reuse a trace made under other patches
             pl, converged = jax.jit(lambda *a: mhss.solve_pl(*a))(coef, mean, sd, rhs)
         return np.asarray(pl), np.asarray(converged)
@@ -909,7 +915,7 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
     assert proved[0].sum() < proved[1].sum() < rhs.size == proved[2].sum()
     assert np.all(pl - root <= mhss.FAST_PROOF_TOL_M)
     check(*solve(rounds=1))  # the bracketed branch runs for the 2.3 % left
-    pl_b, converged_b = (np.asarray(a) for a in jax.jit(mhss._solve_pl_bracketed)(
+    pl_b, converged_b = (np.asarray(a) for a in jax.jit(mhss.solve_pl_bracketed)(
         coef, mean, sd, rhs))
     assert converged_b.all() and np.all(np.abs(pl_b - pl) <= mhss.PL_TOLERANCE_M)
 
@@ -920,7 +926,8 @@ def test_bench_case_is_proved_by_the_taylor_step():
     and the bracketed branch stay idle in (almost) every chunk. With both disabled (no probe
     round, bracketed solver returning NaN), at most 1 of 4096 geometries is NOT_CONVERGED
     (measured: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
-    from oaraim.araim import mhss
+    from oaraim.araim.batching import jit_kernel
+    from oaraim.araim.mhss import Sources, protection_levels_kernel, root
     from oaraim.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(4096, seed=3)
@@ -929,17 +936,12 @@ def test_bench_case_is_proved_by_the_taylor_step():
         return jnp.full(rhs.shape, jnp.nan), jnp.zeros(rhs.shape, bool)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mhss, "_solve_pl_bracketed", no_bracketed)
-        mp.setattr(mhss, "FAST_EXTRA_ROUNDS", 0)
-        # new jitted functions: the cached ones were traced without these patches
-        mp.setattr(mhss, "_protection_levels_part_jit", mhss.jit_kernel(
-            lambda *a, **k: mhss._protection_levels_part(*a, **k),
-            static_argnames=("size",) + mhss._STATIC))
-        mp.setattr(mhss, "_protection_levels_jit", mhss.jit_kernel(
-            lambda *a, **k: mhss._protection_levels(*a, **k), static_argnames=mhss._STATIC))
-        res = protection_levels(
-            x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
-            x["p_sat"], x["p_const"], budget(), x["valid"], max_order=1)
+        mp.setattr(root, "solve_pl_bracketed", no_bracketed)
+        mp.setattr(root, "FAST_EXTRA_ROUNDS", 0)
+        # a new jitted function: the cached kernels were traced without these patches
+        res = jit_kernel(lambda s, p_const: protection_levels_kernel(s, p_const, budget(),
+                                                                     max_order=1))(
+            Sources(*(x[k] for k in Sources._fields)), x["p_const"])
     status = np.asarray(res.status)
     assert np.sum(status == Status.NOT_CONVERGED) <= 1
     assert np.sum(status == Status.OK) >= status.size - 1
@@ -995,7 +997,12 @@ def test_kernel_compiler_options_change_no_bit():
     beyond this: the 2000 random geometries of ``random_cases`` at orders 1, 2 and
     3 (whole, single and generic modes) and the FDE functions, all bit-identical."""
     from oaraim.araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
-    from oaraim.araim.mhss import _protection_levels, prepare_inputs, protection_levels_threaded
+    from oaraim.araim.mhss import (
+        Sources,
+        prepare_inputs,
+        protection_levels_kernel,
+        protection_levels_threaded,
+    )
     from oaraim.bench import mhss_bench_inputs
 
     assert KERNEL_COMPILER_OPTIONS  # else this compares a kernel with itself
@@ -1004,9 +1011,10 @@ def test_kernel_compiler_options_change_no_bit():
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I
     got = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
-    want = jax.jit(_protection_levels, static_argnames=(
-        "budget", "max_order", "all_in_view_weighting", "iterations", "fault_modes"))(
-        *args, budget=budget, max_order=1, fault_modes=GROUPED)
+    # a plain jax.jit around the kernel: XLA's default options (the kernel runs inline)
+    want = jax.jit(lambda s, p_const: protection_levels_kernel(
+        s, p_const, budget, max_order=1, fault_modes=GROUPED))(Sources(*args[:6], args[7]),
+                                                               args[6])
     assert np.all(np.isfinite(np.asarray(want.hpl_m)))
     for name, a, b in zip(got._fields, got, want, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name

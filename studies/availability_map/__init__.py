@@ -37,7 +37,7 @@ from oaraim.araim import availability as av
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.mhss import _protection_levels, required_order
+from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
 from oaraim.geometry.sky import look_angles, resolve_source
@@ -256,10 +256,10 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
         x = {k: jnp.concatenate([x[k], s[k]], -1) for k in x}
         g = jnp.concatenate([g, geometry.geometry_rows(s_az, jnp.where(s_valid, s_el, 0.0))],
                             -2)
-    r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                           x["p_sat"], p_const, x["valid"], budget=budget, max_order=max_order,
-                           fault_modes=fault_mode_rule(fault_modes),
-                           position_optimization=position_optimization)
+    r = protection_levels_kernel(Sources(g, x["constellation"], x["var_int"], x["var_acc"],
+                                         x["b_nom"], x["p_sat"], x["valid"]), p_const, budget,
+                                 max_order=max_order, fault_modes=fault_mode_rule(fault_modes),
+                                 position_optimization=position_optimization)
     ok = av.available(r.hpl_m, r.vpl_m, r.emt_m, r.sigma_acc_u_m, r.status, requirements)
     return {"hpl_m": r.hpl_m, "vpl_m": r.vpl_m, "emt_m": r.emt_m,
             "sigma_acc_m": r.sigma_acc_u_m, "status": r.status.astype(jnp.int8),

@@ -42,7 +42,7 @@ from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.mhss import _protection_levels, required_order
+from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
     Param,
@@ -188,10 +188,10 @@ def concat_inputs(a, b):
 
 
 def mhss(g, x, p_const, max_order, fault_modes=FAULT_MODES):
-    """HPL, VPL and status of a batch (B, L) through the private kernel (we are inside jit)."""
-    r = _protection_levels(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                           x["p_sat"], p_const, x["valid"], budget=BUDGET, max_order=max_order,
-                           fault_modes=fault_mode_rule(fault_modes))
+    """HPL, VPL and status of a batch (B, L) through the jit-safe kernel (we are inside jit)."""
+    r = protection_levels_kernel(Sources(g, x["constellation"], x["var_int"], x["var_acc"],
+                                         x["b_nom"], x["p_sat"], x["valid"]), p_const, BUDGET,
+                                 max_order=max_order, fault_modes=fault_mode_rule(fault_modes))
     return r.hpl_m, r.vpl_m, r.status, r.order, r.n_modes
 
 

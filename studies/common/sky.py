@@ -35,7 +35,7 @@ def resolve_sky(nav, default_file):
 
 def file_day_start(ephemeris):
     """00:00 GPS time of the day holding most of the file's records."""
-    toe = ephemeris._toe_healthy[np.isfinite(ephemeris._toe_healthy)]
+    toe = ephemeris.toe_healthy_s
     days = np.floor(toe / gpstime.SECONDS_PER_DAY).astype(np.int64)
     vals, counts = np.unique(days, return_counts=True)
     return float(vals[np.argmax(counts)] * gpstime.SECONDS_PER_DAY)

@@ -1,0 +1,89 @@
+"""Multiple-hypothesis solution separation (MHSS) protection levels, seed 004 eqs. (8)-(16).
+
+A small package, one concern per module:
+
+- ``inputs``: the ``Sources`` pytree, the host's argument checks and the kernel's own
+  (``Status.INVALID_INPUT``);
+- ``orders``: the fault-mode order a batch needs (``required_order``);
+- ``projection``: every fault mode's fault-tolerant solution, sigmas, biases, separations and
+  thresholds (eqs. 8-12, ``project``);
+- ``root``: the PL equations and their root finder (eqs. 14-16, ``pls_from_projection``,
+  ``solve_pl``);
+- ``entry``: the jit-safe kernel ``protection_levels_kernel`` and the host function
+  ``protection_levels`` over it.
+
+The names below are this package's public face; ``araim.fde`` builds the solution-separation
+test and exclusion on ``project`` and ``pls_from_projection``.
+"""
+
+from oaraim.araim.mhss.entry import (
+    MHSSResult,
+    batch_last_inputs,
+    kernel_cache_size,
+    protection_levels,
+    protection_levels_kernel,
+    protection_levels_threaded,
+)
+from oaraim.araim.mhss.inputs import (
+    UNIT_ROW_TOLERANCE,
+    Sources,
+    check_inputs,
+    host_inputs,
+    prepare_inputs,
+)
+from oaraim.araim.mhss.orders import MAX_AUTO_ORDER, higher_order_flags, required_order
+from oaraim.araim.mhss.projection import (
+    SINGLE_REDUNDANCY_TOLERANCE,
+    ZERO_SEPARATION_RTOL,
+    Projection,
+    project,
+)
+from oaraim.araim.mhss.root import (
+    FAST_EXTRA_ROUNDS,
+    FAST_PROOF_TOL_M,
+    NEWTON_STEP_TOL_M,
+    PL_ITERATIONS,
+    PL_MARGIN_M,
+    PL_TOLERANCE_M,
+    Q_INVERSE_APPROX_MARGIN,
+    pls_from_projection,
+    q_function,
+    q_inverse,
+    q_inverse_approx,
+    solve_pl,
+    solve_pl_bracketed,
+)
+
+__all__ = [
+    "FAST_EXTRA_ROUNDS",
+    "FAST_PROOF_TOL_M",
+    "MAX_AUTO_ORDER",
+    "MHSSResult",
+    "NEWTON_STEP_TOL_M",
+    "PL_ITERATIONS",
+    "PL_MARGIN_M",
+    "PL_TOLERANCE_M",
+    "Projection",
+    "Q_INVERSE_APPROX_MARGIN",
+    "SINGLE_REDUNDANCY_TOLERANCE",
+    "Sources",
+    "UNIT_ROW_TOLERANCE",
+    "ZERO_SEPARATION_RTOL",
+    "batch_last_inputs",
+    "check_inputs",
+    "higher_order_flags",
+    "host_inputs",
+    "kernel_cache_size",
+    "pls_from_projection",
+    "prepare_inputs",
+    "project",
+    "protection_levels",
+    "protection_levels_kernel",
+    "protection_levels_threaded",
+    "q_function",
+    "q_inverse",
+    "q_inverse_approx",
+    "required_order",
+    "solve_pl",
+    "solve_pl_bracketed",
+]
