@@ -93,6 +93,12 @@ __all__ += [
 ]
 
 from oaraim.araim import snapshot  # noqa: E402
-from oaraim.araim.snapshot import MonitorReplay, ReplayResult, replay, replay_metrics  # noqa: E402
+from oaraim.araim.snapshot import (  # noqa: E402
+    MonitorReplay,
+    ReplayConfig,
+    ReplayResult,
+    replay,
+    replay_metrics,
+)
 
-__all__ += ["MonitorReplay", "ReplayResult", "replay", "replay_metrics", "snapshot"]
+__all__ += ["MonitorReplay", "ReplayConfig", "ReplayResult", "replay", "replay_metrics", "snapshot"]

@@ -256,11 +256,42 @@ def _mhss_terms(x, correction_enu, ok, truth, frame_ecef):
 # --------------------------------------------------------------------------- public
 
 
+class ReplayConfig(NamedTuple):
+    """How a snapshot replay solves and monitors (everything that is not per-epoch data).
+
+    ``replay(..., config=ReplayConfig(monitors=("slope",), p_fa=1e-5))``; ``_replace`` gives a
+    variant. Checked when the replay starts (a bad value raises ``ValueError`` naming it)."""
+
+    monitors: tuple = ("slope", "mhss")
+    """Integrity monitors to run, among "slope" (seed 001 chi-square slope RAIM) and "mhss"
+    (seed 004 / ADD MHSS with exclusion); one left out is ``None`` in the result (the MHSS
+    compiles for tens of seconds per (L, C) shape on a 2-core CPU, slope RAIM in seconds)."""
+    budget: IntegrityBudget = BUDGET_SEED004_TABLE_I
+    """MHSS integrity budget (default seed 004 Table I by its symbols)."""
+    fault_modes: object = None
+    """MHSS fault-mode convention, a name or ``araim.FaultModeRule`` (default ``add-v4.2``,
+    the current ADD; ``araim.protection_levels``)."""
+    max_order: int | None = None
+    """MHSS fault-mode order; None picks the smallest meeting P_thresh over the batch (give it
+    to make an epoch's result independent of its batch)."""
+    p_fa: float = DEFAULT_P_FA
+    """Slope RAIM false-alarm probability (default 1e-5, as our seed 001 studies)."""
+    p_md: float = DEFAULT_P_MD
+    """Slope RAIM missed-detection probability (default 1e-3)."""
+    n_iter: int = 10
+    """Gauss-Newton iterations of the WNLS (static)."""
+    frame: str = "ecef"
+    """"ecef" or "enu": the frame of the transmitter and truth positions (module docstring)."""
+
+
+#: the default configuration: slope RAIM and MHSS, seed 004 Table I budget, ADD v4.2 modes
+DEFAULT_REPLAY = ReplayConfig()
+
+
 def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
            correction_m=0.0, constellation=None, p_const=(1e-8,), p_sat=1e-5, b_nom_m=0.75,
-           budget: IntegrityBudget = BUDGET_SEED004_TABLE_I, p_fa=DEFAULT_P_FA,
-           p_md=DEFAULT_P_MD, slope_sigma_m=None, x0_m=None, n_iter=10, max_order=None,
-           frame="ecef", monitors=("slope", "mhss"), fault_modes=None) -> ReplayResult:
+           slope_sigma_m=None, x0_m=None, config: ReplayConfig = DEFAULT_REPLAY
+           ) -> ReplayResult:
     """Snapshot replay of T epochs of L sources (module docstring).
 
     Args:
@@ -276,25 +307,19 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
       constellation: (T, L) clock groups 0..C-1 (default all 0); C = len(p_const).
       p_const: (C,) P_const per group (seed 004 Table I: GPS 1e-8, SOP 1e-4).
       p_sat, b_nom_m: P_s and b_nom per source (Table I GPS: 1e-5, 0.75 m), broadcastable.
-      budget: MHSS ``IntegrityBudget`` (default seed 004 Table I by its symbols).
-      p_fa, p_md: chi-square slope RAIM false-alarm and missed-detection probabilities
-        (default 1e-5 and 1e-3, as our seed 001 studies; seed 001 is silent).
       slope_sigma_m: (T, L) sigmas of slope RAIM; default sqrt(var_int_m2).
       x0_m: (3,) or (T, 3) WNLS start (default the frame origin: the Earth's centre converges
         for GNSS; give a nearby point for SOP-only epochs).
-      n_iter: Gauss-Newton iterations (static).
-      max_order: MHSS fault-mode order; None picks the smallest meeting P_thresh over the
-        batch (pass it explicitly to make an epoch's result independent of its batch).
-      frame: "ecef" or "enu" (module docstring).
-      monitors: which integrity monitors to run, among "slope" (seed 001) and "mhss" (seed
-        004); one left out is ``None`` in the result (the MHSS with exclusion compiles for
-        ~15-30 s per (L, C) shape on a 2-core CPU; a slope-only replay needs ~2 s).
-      fault_modes: the MHSS fault-mode convention (``araim.protection_levels``; default
-        ``add-v4.2``, the current ADD).
+      config: ``ReplayConfig``: monitors, MHSS budget, fault modes and order, slope RAIM
+        P_FA / P_MD, WNLS iterations, frame.
 
     Returns:
       ``ReplayResult``; every PL and error is finite or inf, never NaN.
     """
+    if not isinstance(config, ReplayConfig):
+        raise ValueError(f"config must be an araim.snapshot.ReplayConfig, got "
+                         f"{type(config).__name__}")
+    monitors, budget, fault_modes, max_order, p_fa, p_md, n_iter, frame = config
     bad = set(monitors) - {"slope", "mhss"}
     if bad or not monitors:
         raise ValueError(f"monitors must be a non-empty subset of ('slope', 'mhss'), got "

@@ -260,8 +260,9 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
             c["pseudorange_m"][idx], c["tx_pos_m"][idx], c["var_int_m2"][idx],
             c["var_acc_m2"][idx], v_c[idx], truth, correction_m=c["correction_m"][idx],
             p_const=(params["p_const"],), p_sat=params["p_sat"], b_nom_m=params["b_nom_m"],
-            budget=araim.BUDGET_SEED004_TABLE_I, p_fa=params["p_fa"], p_md=params["p_md"],
-            x0_m=x0[idx], max_order=max_order, fault_modes=params["fault_modes"])
+            x0_m=x0[idx], config=snapshot.ReplayConfig(
+                budget=araim.BUDGET_SEED004_TABLE_I, p_fa=params["p_fa"], p_md=params["p_md"],
+                max_order=max_order, fault_modes=params["fault_modes"]))
         sl = slice(start, start + n)
         f = lambda a, n=n: np.asarray(a)[:n]  # noqa: E731
         vals = {

@@ -14,10 +14,10 @@ Setup (stated choices; seed 001 gives neither route, date, rates nor sigmas):
     (ADD accuracy model, sigma_URE = 2/3 sigma_URA = 0.67 m plus troposphere and user terms),
     LTE N(0, 2^2 m^2) (the scenario's "meter-level" LTE ranging).
   * Slope RAIM of seed 001 section 3.1 on the WNLS solution (``araim.snapshot.replay`` with
-    ``monitors=("slope",)``; with one clock group it is ``araim.slope_hpl``): one receiver clock
-    (seed 001's state [r, c dt]; tower clocks known), R = diag(sigma^2) with GPS sigma =
-    sqrt(C_int(el)) (ADD integrity model, sigma_URA = 1 m) and LTE sigma = 2 m, P_FA = 1e-5,
-    P_MD = 1e-3 (the repo's seed 001 studies; seed 001 silent).
+    ``ReplayConfig(monitors=("slope",))``; with one clock group it is ``araim.slope_hpl``): one
+    receiver clock (seed 001's state [r, c dt]; tower clocks known), R = diag(sigma^2) with GPS
+    sigma = sqrt(C_int(el)) (ADD integrity model, sigma_URA = 1 m) and LTE sigma = 2 m, P_FA =
+    1e-5, P_MD = 1e-3 (the repo's seed 001 studies; seed 001 silent).
   * One realization = one noise draw of the whole drive (draw i from fold_in(key(seed), i));
     ``--realizations N`` draws (default 100). The HPL depends on the geometry only (to ~1e-3 m
     through the linearisation point), so the mean HPLs barely move between draws; the draws
@@ -149,8 +149,9 @@ class Seed001Vehicle(Study):
                 r = snapshot.replay(
                     pr.reshape(-1, n_l), rows(geom.tx_pos_m), rows(var_int), rows(var_int),
                     rows(use), rows(geom.truth_m), correction_m=rows(corr),
-                    slope_sigma_m=rows(sig_model), p_fa=params["p_fa"], p_md=params["p_md"],
-                    x0_m=x0, monitors=("slope",))
+                    slope_sigma_m=rows(sig_model), x0_m=x0,
+                    config=snapshot.ReplayConfig(monitors=("slope",), p_fa=params["p_fa"],
+                                                 p_md=params["p_md"]))
                 hpl = np.asarray(r.slope.hpl_all_in_view_m).reshape(ids.size, n_t)[:nb]
                 hpe = np.asarray(r.hpe_m).reshape(ids.size, n_t)[:nb]
                 det = np.asarray(r.slope.detected).reshape(ids.size, n_t)[:nb]

@@ -85,6 +85,8 @@ STANFORD_SOPS = (0, 1, 2, 4, 8)
 #: epochs per MHSS kernel call (fixed: results do not depend on N or the chunk)
 BLOCK = 480
 BLOCK_FDE = 96
+#: the slope-RAIM-only replay of the flight (the solution and the sources used)
+SLOPE_ONLY = snapshot.ReplayConfig(monitors=("slope",))
 
 
 def parse_prn(name, v):
@@ -281,7 +283,7 @@ class Seed004Uav(Study):
         n_t = use.shape[0]
         r = snapshot.replay(pr, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
                             correction_m=corr, constellation=cons, p_const=p_const, x0_m=x0,
-                            monitors=("slope",))
+                            config=SLOPE_ONLY)
         used = np.asarray(r.used)
         g = np.asarray(r.g_enu)
         mo = int(required_order(jnp.asarray(used), jnp.asarray(np.broadcast_to(cons, used.shape)),
@@ -318,7 +320,8 @@ class Seed004Uav(Study):
                                 use[idx], geom.truth_m[idx], correction_m=corr[idx],
                                 constellation=np.broadcast_to(cons, (idx.size, cons.size)),
                                 p_const=p_const, p_sat=p_sat, b_nom_m=b_nom, x0_m=x0[idx],
-                                max_order=mo, monitors=("mhss",), fault_modes=self.fault_modes)
+                                config=snapshot.ReplayConfig(monitors=("mhss",), max_order=mo,
+                                                             fault_modes=self.fault_modes))
             s = slice(start, start + n)
             out["hpl"][s] = np.asarray(r.mhss.hpl_m)[:n]
             out["hpe"][s] = np.asarray(r.mhss.hpe_m)[:n]
@@ -355,7 +358,7 @@ class Seed004Uav(Study):
             use = geom.valid & (geom.is_gps | np.isin(np.arange(pr.shape[1]), extra))[None]
             r = snapshot.replay(prf, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
                                 correction_m=corr, constellation=cons, p_const=p_const,
-                                x0_m=x0, monitors=("slope",))
+                                x0_m=x0, config=SLOPE_ONLY)
             used = np.asarray(r.used)
             mo = int(required_order(jnp.asarray(used),
                                     jnp.asarray(np.broadcast_to(cons, used.shape)),

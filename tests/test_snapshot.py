@@ -180,7 +180,8 @@ def test_replay_fault_free_and_padding_invariance():
 def test_group_slopes_one_clock_equals_araim_slope_hpl():
     x, tx, pr, valid = _sky(2)
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x, p_fa=1e-5, p_md=1e-3)
+    r = snapshot.replay(pr, tx, var, var, valid, x,
+                        config=snapshot.ReplayConfig(p_fa=1e-5, p_md=1e-3))
     ref = araim.slope_hpl(r.g_enu, 1.0, p_fa=1e-5, p_md=1e-3, valid=r.used)
     np.testing.assert_allclose(r.slope.hpl_all_in_view_m, ref.hpl_m, rtol=1e-10)
 
@@ -250,7 +251,8 @@ def test_replay_gnss_plus_sop_clock_groups_slope():
     x, tx, pr, valid, cons, rng = _gnss_plus_sop(5)
     var_int = np.where(cons == 1, 9.0, 1.0)
     r = snapshot.replay(pr, tx, var_int, var_int, valid, x, constellation=cons,
-                        p_const=(1e-8, 1e-4), x0_m=x + 100.0, monitors=("slope",))
+                        p_const=(1e-8, 1e-4), x0_m=x + 100.0,
+                        config=snapshot.ReplayConfig(monitors=("slope",)))
     assert r.mhss is None and r.max_order == 0
     assert np.all(r.wnls.status == araim.Status.OK)
     assert np.max(r.hpe_m) < 1e-6 and np.max(r.vpe_m) < 1e-6
@@ -260,7 +262,8 @@ def test_replay_gnss_plus_sop_clock_groups_slope():
     pr[:20, 9] += 60.0
     noisy = pr + np.where(valid, rng.normal(0.0, 0.3, pr.shape), 0.0)
     r = snapshot.replay(noisy, tx, var_int, var_int, valid, x, constellation=cons,
-                        p_const=(1e-8, 1e-4), x0_m=x + 100.0, monitors=("slope",))
+                        p_const=(1e-8, 1e-4), x0_m=x + 100.0,
+                        config=snapshot.ReplayConfig(monitors=("slope",)))
     assert np.all(r.slope.detected[:20]) and not np.any(r.slope.detected[20:])
     assert np.all(r.slope.excluded[:20, 9]) and np.all(r.slope.excluded[:20].sum(-1) == 1)
     assert np.all(r.slope.hpe_m < r.slope.hpl_m)
@@ -294,8 +297,10 @@ def test_replay_rejects_bad_input():
     with pytest.raises(ValueError, match="var_int_m2"):
         snapshot.replay(pr, tx, -var, var, valid, x)
     with pytest.raises(ValueError, match="p_fa"):
-        snapshot.replay(pr, tx, var, var, valid, x, p_fa=2.0)
+        snapshot.replay(pr, tx, var, var, valid, x, config=snapshot.ReplayConfig(p_fa=2.0))
     with pytest.raises(ValueError, match="constellation"):
         snapshot.replay(pr, tx, var, var, valid, x, constellation=np.full(valid.shape, 3))
     with pytest.raises(ValueError, match="frame"):
-        snapshot.replay(pr, tx, var, var, valid, x, frame="ned")
+        snapshot.replay(pr, tx, var, var, valid, x, config=snapshot.ReplayConfig(frame="ned"))
+    with pytest.raises(ValueError, match="config must be an araim.snapshot.ReplayConfig"):
+        snapshot.replay(pr, tx, var, var, valid, x, config={"frame": "enu"})

@@ -42,7 +42,7 @@ def export(lats):
     prn = np.where(cons == GPS, 1, 101) + np.array(
         [int("".join(c for c in str(s) if c.isdigit()) or 0) % 100 for s in sv])
     for lat in lats:
-        for j, lon in enumerate(np.asarray(p["lon_deg"])):
+        for lon in np.asarray(p["lon_deg"]):
             rx = geometry.geodetic_to_ecef(np.deg2rad(lat), np.deg2rad(lon), p["height_m"])
             az, el, _, vis = (np.asarray(x) for x in look_angles(
                 rx, jnp.asarray(ecef), jnp.asarray(ok), np.deg2rad(p["mask_deg"])))
