@@ -18,7 +18,7 @@ class Param:
     parse: Callable[[str, Any], Any]
     """``(name, raw value) -> value``; raises ValueError naming ``name`` when invalid."""
     doc: str
-    """What the parameter means (``oaraim list``, docs/studies.md)."""
+    """What the parameter means, one line (``oaraim list`` prints it)."""
     unit: str = ""
     """Its unit, e.g. ``"m"`` or ``"deg"`` ("" when it has none)."""
 
