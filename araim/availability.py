@@ -43,17 +43,29 @@ class Requirements(NamedTuple):
     """Alert limits and thresholds of a service level, metres; ``inf`` means not applied."""
 
     val_m: float
+    """Vertical alert limit VAL: VPL <= VAL."""
     hal_m: float
+    """Horizontal alert limit HAL: HPL <= HAL."""
     emt_m: float
+    """Effect-of-monitor-threshold limit: EMT <= it."""
     sigma_acc_v_m: float
+    """Vertical fault-free accuracy limit: sigma_acc <= it (1.87 m for LPV-200)."""
 
 
 class ServiceLevel(NamedTuple):
+    """One entry of ``SERVICE_LEVELS``: what an epoch must meet to be available and what
+    share of epochs a location needs to count as covered."""
+
     name: str
+    """Display name, e.g. ``"LPV-200"``."""
     requirements: Requirements
+    """The alert limits and thresholds an available epoch meets."""
     budget: IntegrityBudget
-    target: float  # availability a location needs to count as covered
+    """The integrity and continuity allocation the protection levels are computed with."""
+    target: float
+    """Availability a location needs to count as covered, in [0, 1] (0.995 for LPV-200)."""
     source: str
+    """Where the criteria and the allocation come from (MAAST, the ADD, seed 004)."""
 
 
 _LPV200 = Requirements(val_m=35.0, hal_m=40.0, emt_m=15.0, sigma_acc_v_m=1.87)

@@ -56,13 +56,23 @@ TH, POS, VEL, BG, BA, CLK = (slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 
 
 class EkfState(NamedTuple):
-    q: jnp.ndarray      # (4,) JPL quaternion, G -> body
-    r: jnp.ndarray      # (3,) ENU position, m
-    v: jnp.ndarray      # (3,) ENU velocity, m/s
-    bg: jnp.ndarray     # (3,) gyro bias, rad/s
-    ba: jnp.ndarray     # (3,) accelerometer bias, m/s^2
-    clk: jnp.ndarray    # (2,) [c dt_r (m), c dt_r_dot (m/s)]
-    P: jnp.ndarray      # (17, 17) error covariance
+    """The filter's nominal state x = [q, r, v, b_g, b_a, x_clk] and the covariance of its
+    17-element error state (seed 000 section II-B/C; the module docstring)."""
+
+    q: jnp.ndarray
+    """(4,) JPL unit quaternion (scalar last) of the rotation from G (local ENU) to the body."""
+    r: jnp.ndarray
+    """(3,) position in G (ENU), m."""
+    v: jnp.ndarray
+    """(3,) velocity in G (ENU), m/s."""
+    bg: jnp.ndarray
+    """(3,) gyroscope bias, rad/s."""
+    ba: jnp.ndarray
+    """(3,) accelerometer bias, m/s^2."""
+    clk: jnp.ndarray
+    """(2,) receiver clock [c dt_r (m), c dt_r_dot (m/s)] (seed 000 eq. 1)."""
+    P: jnp.ndarray
+    """(17, 17) error-state covariance, order [theta, r, v, b_g, b_a, x_clk]."""
 
 
 class EkfParams(NamedTuple):

@@ -109,13 +109,24 @@ def mode_template(n_sources: int, n_constellations: int, max_order: int) -> Mode
 
 
 class GroupProbabilities(NamedTuple):
-    member: jax.Array  # (L, C, B) valid source l belongs to constellation c
-    n_sources: jax.Array  # (C, B) valid sources per constellation
-    present: jax.Array  # (C, B)
-    p_none: jax.Array  # (C, B) 1 for absent constellations
-    p_whole: jax.Array  # (C, B) 0 for absent constellations
-    p_fault: jax.Array  # (C, B) 1 - p_none, computed without cancellation
-    p_single: jax.Array  # (L, B) 0 for padding and for constellations with one source
+    """The per-constellation state probabilities of the module docstring ("Group states"),
+    batch-last (``group_probabilities``)."""
+
+    member: jax.Array
+    """(L, C, B) bool: valid source l belongs to constellation c."""
+    n_sources: jax.Array
+    """(C, B) number of valid sources per constellation."""
+    present: jax.Array
+    """(C, B) bool: the constellation has at least one valid source."""
+    p_none: jax.Array
+    """(C, B) P_none_c, no fault in the constellation (1 for absent constellations)."""
+    p_whole: jax.Array
+    """(C, B) P_whole_c, the constellation event or >= 2 faulty sources (0 when absent)."""
+    p_fault: jax.Array
+    """(C, B) P_fault_c = 1 - P_none_c, computed without cancellation (0 when absent)."""
+    p_single: jax.Array
+    """(L, B) P_single_l, source l alone faulty (0 for padding and for constellations with
+    one source)."""
 
 
 def group_probabilities(valid, constellation, p_sat, p_const) -> GroupProbabilities:
@@ -173,16 +184,28 @@ def faulty_constellation_tail(p_fault, max_order: int):
 
 
 class FaultModes(NamedTuple):
-    excluded: jax.Array  # (T, L, B) bool: sources hypothesised faulty (valid ones only)
-    excluded_constellation: jax.Array  # (T, C, B) bool: constellations excluded whole
-    prior: jax.Array  # (T, B) prior probability assigned to the mode (0 where not live)
-    live: jax.Array  # (T, B) bool: monitored at this geometry's order
-    order: jax.Array  # (B,) int: the order r
-    p_beyond_order: jax.Array  # (B,) P_NM before singular modes (grouped: P(more than r
-    #                            constellations faulty); event rules: every set not monitored)
-    p_no_fault: jax.Array  # (B,)
-    #: (B,) the convention would monitor a mode beyond the template order (kept in P_NM)
+    """The candidate fault modes of a batch of geometries: T template slots, which are live,
+    what each excludes and its prior. Batch-last as the kernels build them (shapes below);
+    ``fault_modes`` returns them batch-first, (..., T, L) and so on."""
+
+    excluded: jax.Array
+    """(T, L, B) bool: the sources the mode hypothesises faulty (valid ones only)."""
+    excluded_constellation: jax.Array
+    """(T, C, B) bool: the constellations it excludes whole (their clock states dropped)."""
+    prior: jax.Array
+    """(T, B) prior probability assigned to the mode (0 where not live)."""
+    live: jax.Array
+    """(T, B) bool: the mode is monitored at this geometry's order."""
+    order: jax.Array
+    """(B,) int: the order r, the most constellations (events) a live mode stands for."""
+    p_beyond_order: jax.Array
+    """(B,) P_NM before singular modes: grouped, P(more than r constellations faulty); event
+    rules, the prior of every set not monitored."""
+    p_no_fault: jax.Array
+    """(B,) probability of no fault at all (no source or constellation event)."""
     needs_higher_order: jax.Array
+    """(B,) bool: the convention would monitor a mode beyond the template order (kept in
+    P_NM instead)."""
 
 
 def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_order: int):
@@ -333,10 +356,14 @@ class FaultModeRule:
 
     @property
     def consolidated(self) -> bool:
+        """The convention folds small sets into their constellation's mode (``add-v4.2``,
+        ``add-v3-consolidated``)."""
         return self.name in ("add-v4.2", "add-v3-consolidated")
 
     @property
     def max_order(self) -> int:
+        """The highest fault-mode order the convention enumerates: ``MAX_EVENT_ORDER`` (pairs
+        of events) for the event rules, 3 for ``grouped``."""
         return MAX_EVENT_ORDER if self.events else 3
 
 
@@ -364,10 +391,13 @@ class EventTemplate(NamedTuple):
     sources: np.ndarray
     constellations: np.ndarray
     order: np.ndarray
+    """(T,) int: the number of events in each set."""
 
 
 @cache
 def event_template(n_sources: int, n_constellations: int, order: int) -> EventTemplate:
+    """Every set of 1..``order`` events over ``n_sources`` sources and ``n_constellations``
+    constellations, in MAAST's enumeration order (cached per size)."""
     L, C = n_sources, n_constellations
     src, con, k_of = [], [], []
     for k in range(1, order + 1):

@@ -63,30 +63,55 @@ DEFAULT_P_MD = 1e-3
 class MonitorReplay(NamedTuple):
     """One integrity monitor over the epochs (slope RAIM or MHSS)."""
 
-    hpl_all_in_view_m: jax.Array  # (T,) before any exclusion
-    vpl_all_in_view_m: jax.Array  # (T,)
-    detected: jax.Array  # (T,) the all-in-view test failed
-    statistic: jax.Array  # (T,) slope: WSSE / T(P_FA, dof); MHSS: max tau (detected if > 1)
-    excluded: jax.Array  # (T, L) sources excluded
-    hpl_m: jax.Array  # (T,) PLs of the solution kept (all-in-view when nothing detected)
-    vpl_m: jax.Array  # (T,)
-    position_m: jax.Array  # (T, 3) the solution kept (inf where exclusion failed)
-    error_enu_m: jax.Array  # (T, 3) its error in the ENU frame at the truth
-    hpe_m: jax.Array  # (T,)
-    vpe_m: jax.Array  # (T,)
-    status: jax.Array  # (T,) int8 Status of the kept PLs
+    hpl_all_in_view_m: jax.Array
+    """(T,) HPL of the all-in-view solution, before any exclusion (m)."""
+    vpl_all_in_view_m: jax.Array
+    """(T,) VPL of the all-in-view solution (m)."""
+    detected: jax.Array
+    """(T,) bool: the all-in-view test failed."""
+    statistic: jax.Array
+    """(T,) the test statistic: slope, WSSE / T(P_FA, dof); MHSS, the largest tau (detected
+    if > 1)."""
+    excluded: jax.Array
+    """(T, L) bool: the sources excluded."""
+    hpl_m: jax.Array
+    """(T,) HPL of the solution kept (the all-in-view one when nothing was detected), m."""
+    vpl_m: jax.Array
+    """(T,) VPL of the solution kept, m."""
+    position_m: jax.Array
+    """(T, 3) the solution kept, in the frame of the inputs (inf where exclusion failed)."""
+    error_enu_m: jax.Array
+    """(T, 3) its error in the ENU frame at the truth, m."""
+    hpe_m: jax.Array
+    """(T,) its horizontal position error |(e, n)|, m (inf where it failed)."""
+    vpe_m: jax.Array
+    """(T,) its vertical position error |u|, m (inf where it failed)."""
+    status: jax.Array
+    """(T,) int8 ``Status`` of the kept PLs."""
 
 
 class ReplayResult(NamedTuple):
-    wnls: WNLSResult  # all-in-view solution (position_m in the frame of the inputs)
-    g_enu: jax.Array  # (T, L, 3) geometry rows at the solution (0 for unused sources)
-    used: jax.Array  # (T, L) sources used (valid and the epoch solvable)
-    error_enu_m: jax.Array  # (T, 3) all-in-view error, ENU at the truth
-    hpe_m: jax.Array  # (T,) inf where the WNLS failed
-    vpe_m: jax.Array  # (T,)
-    slope: MonitorReplay | None  # None if not in ``monitors``
+    """What ``replay`` returns: the all-in-view solution of every epoch, its errors against
+    the truth and each integrity monitor asked for."""
+
+    wnls: WNLSResult
+    """The all-in-view WNLS solution (``position_m`` in the frame of the inputs)."""
+    g_enu: jax.Array
+    """(T, L, 3) geometry rows in the ENU frame at the solution (0 for unused sources)."""
+    used: jax.Array
+    """(T, L) bool: the sources used (valid, and the epoch solvable)."""
+    error_enu_m: jax.Array
+    """(T, 3) all-in-view position error in the ENU frame at the truth, m."""
+    hpe_m: jax.Array
+    """(T,) all-in-view horizontal position error, m (inf where the WNLS failed)."""
+    vpe_m: jax.Array
+    """(T,) all-in-view vertical position error, m (inf where the WNLS failed)."""
+    slope: MonitorReplay | None
+    """Chi-square slope RAIM (step 3 of the module docstring); None if not in ``monitors``."""
     mhss: MonitorReplay | None
-    max_order: int  # MHSS fault-mode order used (0 without the MHSS)
+    """MHSS solution separation (step 4); None if not in ``monitors``."""
+    max_order: int
+    """The MHSS fault-mode order used (0 without the MHSS)."""
 
 
 # --------------------------------------------------------------------------- kernels

@@ -10,6 +10,10 @@ import enum
 
 
 class Status(enum.IntEnum):
+    """Why a result could not be computed, one small integer per epoch or geometry beside
+    the result (stored as int8); 0 is success. ``describe`` gives the readable name."""
+
+    #: the result was computed
     OK = 0
     #: fewer valid sources than states + 1: no redundancy, so no fault can be detected
     TOO_FEW_SOURCES = 1

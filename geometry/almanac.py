@@ -95,6 +95,10 @@ class Almanac:
         return np.array([where[str(p)] for p in np.atleast_1d(prns)])
 
     def sat_position_ecef(self, t_gps_s, prns=None):
+        """``(ecef (T, S, 3) metres, valid (T, S), prns (S,))`` at GPS times ``t_gps_s`` (T,),
+        as ``Ephemeris.sat_position_ecef``: Keplerian propagation of each almanac record (no
+        harmonic corrections), ECEF at time t; valid is health == 0, invalid entries hold 0.
+        ``prns`` selects satellites by name (default: all)."""
         idx = self._select(prns)
         el = OrbitElements(*(jnp.asarray(np.asarray(x)[idx]) for x in self._elements))
         t = jnp.atleast_1d(jnp.asarray(t_gps_s, jnp.float64))

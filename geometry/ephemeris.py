@@ -430,11 +430,19 @@ def _record_table(ds, systems, path_str):
 
 
 class SatState(NamedTuple):
-    ecef_m: jax.Array  # (T, S, 3) ECEF at t, metres (0 where not valid)
-    clock_s: jax.Array  # (T, S) satellite clock offset dt_sv incl. relativistic term, seconds
-    valid: jax.Array  # (T, S) bool
-    age_s: jax.Array  # (T, S) t - t_oe of the record used (0 where not valid)
-    prns: np.ndarray  # (S,) names such as 'G05', 'E11'
+    """The satellites at T epochs from broadcast ephemerides (``Ephemeris.sat_state``)."""
+
+    ecef_m: jax.Array
+    """(T, S, 3) position in the ECEF frame at t, metres (0 where not valid)."""
+    clock_s: jax.Array
+    """(T, S) satellite clock offset dt_sv including the relativistic term, seconds."""
+    valid: jax.Array
+    """(T, S) bool: the satellite is healthy and its nearest healthy record lies within
+    ``max_age_s`` of t, with no unhealthy record nearer."""
+    age_s: jax.Array
+    """(T, S) t - t_oe of the record used, seconds (0 where not valid)."""
+    prns: np.ndarray
+    """(S,) satellite names such as ``'G05'``, ``'E11'``."""
 
 
 class Ephemeris:

@@ -31,15 +31,27 @@ CONSTELLATION_CODES = {"gps": GPS, "galileo": GALILEO}
 
 
 class Sky(NamedTuple):
-    az_rad: jax.Array  # (..., T, S) clockwise from north, [0, 2 pi)
-    el_rad: jax.Array  # (..., T, S)
-    range_m: jax.Array  # (..., T, S)
-    valid: jax.Array  # (..., T, S) usable ephemeris and el >= mask
-    prn: np.ndarray  # (S,) satellite numbers
-    constellation: np.ndarray  # (S,) GPS 0, Galileo 1
-    sv: np.ndarray  # (S,) names 'G05', 'E11'
-    t_gps_s: np.ndarray  # (T,)
-    source: str  # what was used
+    """What ``geometry.sky`` returns: the look angles of a fixed satellite list from each
+    receiver at each epoch, padded, with a ``valid`` mask."""
+
+    az_rad: jax.Array
+    """(..., T, S) azimuth, radians clockwise from north, in [0, 2 pi)."""
+    el_rad: jax.Array
+    """(..., T, S) elevation above the local horizon, radians."""
+    range_m: jax.Array
+    """(..., T, S) geometric receiver-satellite range, metres."""
+    valid: jax.Array
+    """(..., T, S) bool: usable ephemeris (healthy, in its validity window) and el >= mask."""
+    prn: np.ndarray
+    """(S,) satellite numbers."""
+    constellation: np.ndarray
+    """(S,) constellation codes: GPS 0, Galileo 1."""
+    sv: np.ndarray
+    """(S,) satellite names such as ``'G05'``, ``'E11'``."""
+    t_gps_s: np.ndarray
+    """(T,) the epochs, GPS seconds."""
+    source: str
+    """What the satellites came from: the ``repr`` of each orbit object, joined by "; "."""
 
 
 def _load_file(path: Path, constellations):

@@ -24,13 +24,22 @@ class SP3Error(ValueError):
 
 
 class PreciseOrbits(NamedTuple):
-    t_gps_s: np.ndarray  # (E,) epochs, GPS seconds
-    prns: np.ndarray  # (S,) names such as 'G05'
-    ecef_m: np.ndarray  # (E, S, 3) centre-of-mass position, metres (0 where missing)
-    clock_s: np.ndarray  # (E, S) satellite clock, seconds (0 where missing)
-    valid: np.ndarray  # (E, S) position present
-    clock_valid: np.ndarray  # (E, S)
+    """The tabulated orbits and clocks of one SP3 file (``read_sp3``), on its epoch grid."""
+
+    t_gps_s: np.ndarray
+    """(E,) epochs, GPS seconds."""
+    prns: np.ndarray
+    """(S,) satellite names such as ``'G05'``."""
+    ecef_m: np.ndarray
+    """(E, S, 3) centre-of-mass position, ECEF metres (0 where missing)."""
+    clock_s: np.ndarray
+    """(E, S) satellite clock offset, seconds (0 where missing)."""
+    valid: np.ndarray
+    """(E, S) bool: the position is present (not all zero)."""
+    clock_valid: np.ndarray
+    """(E, S) bool: the clock is present (not the 999999.999999 bad-value marker)."""
     time_system: str
+    """The file's time system from its ``%c`` line: ``"GPS"`` (or ``"ccc"``, read as GPS)."""
 
 
 def read_sp3(path) -> PreciseOrbits:

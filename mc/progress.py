@@ -48,6 +48,7 @@ class ProgressBar:
         return self
 
     def advance(self, n: int):
+        """Count ``n`` more realizations done."""
         self.done += int(n)
         if self._progress is not None:
             self._progress.update(self._task, advance=int(n))
@@ -59,6 +60,7 @@ class ProgressBar:
 
     @property
     def elapsed_s(self) -> float:
+        """Wall-clock seconds since the bar was made."""
         return time.perf_counter() - self.t0
 
 
@@ -107,6 +109,7 @@ class SweepProgress:
             self._progress.update(self._task, cells_done=self.cells_finished)
 
     def advance(self, realizations: int, cells: int = 0):
+        """Count ``realizations`` more computed and ``cells`` more finished."""
         self.done += int(realizations)
         self.cells_finished += int(cells)
         if self._progress is not None:
@@ -128,4 +131,5 @@ class SweepProgress:
 
     @property
     def elapsed_s(self) -> float:
+        """Wall-clock seconds since the bar was made."""
         return time.perf_counter() - self.t0

@@ -34,6 +34,7 @@ class ChunkPlan:
         object.__setattr__(self, "chunk_size", size)
 
     def chunks(self):
+        """Yield ``(start, size)`` of each chunk in order; the last may be shorter."""
         for start in range(0, self.n, self.chunk_size):
             yield start, min(self.chunk_size, self.n - start)
 

@@ -17,6 +17,8 @@ PACKAGES = ("oaraim", "jax", "jaxlib", "numpy", "scipy", "xarray", "zarr", "matp
 
 
 def jsonable(x):
+    """``x`` as plain JSON values: dict keys as strings, tuples and arrays as lists, NumPy
+    scalars as Python ones, NaN as null and +-inf as the strings "inf" / "-inf"."""
     if isinstance(x, dict):
         return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
@@ -31,6 +33,8 @@ def jsonable(x):
 
 
 def write_json(path, obj):
+    """Write ``jsonable(obj)`` to ``path`` (indented, parent folders made) atomically: a
+    reader never sees half a file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
@@ -39,6 +43,7 @@ def write_json(path, obj):
 
 
 def read_summary(path):
+    """The JSON object stored at ``path`` (a ``summary.json``); "inf" stays a string."""
     return json.loads(Path(path).read_text())
 
 
@@ -56,6 +61,7 @@ def git_commit(cwd=None):
 
 
 def package_versions():
+    """{name: installed version or None} for Python and ``PACKAGES``, for provenance.json."""
     out = {"python": sys.version.split()[0]}
     for name in PACKAGES:
         try:

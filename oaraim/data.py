@@ -48,12 +48,22 @@ class SourceUnreachable(DataUnavailable):
 
 @dataclass(frozen=True)
 class DataFile:
-    name: str  # path under the data folder, e.g. "nav/brdc0010.22n"
+    """One entry of the registry (``data_registry.json``): a real file, how to check it and
+    where it comes from."""
+
+    name: str
+    """Path under the data folder (``OARAIM_DATA``, a mirror, or the cache), e.g.
+    ``"nav/brdc0010.22n"``."""
     sha256: str
+    """Hex sha256 of the file itself, checked whenever it is fetched or first read."""
     size: int
-    url: str  # public HTTPS origin
+    """Size of the file in bytes."""
+    url: str
+    """Its public HTTPS origin, fetched when no local copy or mirror holds it."""
     licence: str
+    """The licence or notice under which the origin publishes it."""
     description: str
+    """One line on what the file is (format, day, station)."""
 
 
 @lru_cache(maxsize=1)
@@ -142,6 +152,7 @@ def data_required() -> bool:
 
 
 def sha256(path) -> str:
+    """Hex sha256 of the file at ``path``, read in 1 MiB blocks."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -390,17 +401,21 @@ class RichDownloadBar:
         self._task = self._progress.add_task(f"fetching {self.label}", total=self.total or None)
 
     def update(self, n):
+        """Advance by ``n`` bytes (pooch's callback); the bar is drawn at the first call."""
         if self._progress is None:
             self._start()
         self._done += n
         self._progress.update(self._task, completed=min(self._done, self.total or self._done))
 
     def reset(self):
+        """Back to 0 bytes of the current ``total`` (pooch calls it at the end, then
+        ``update(total)``, so the bar ends full)."""
         self._done = 0
         if self._progress is not None:
             self._progress.reset(self._task, total=self.total or None)
 
     def close(self):
+        """Stop and remove the bar (transient); nothing if it was never drawn."""
         if self._progress is not None:
             self._progress.stop()
             self._progress = None

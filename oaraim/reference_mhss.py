@@ -87,16 +87,20 @@ class Mode:
 
 @dataclass
 class FaultModeSet:
+    """The candidate fault modes of one geometry and the probabilities they are built from
+    (the grouping rule of the module docstring, or ``event_fault_mode_set``'s events, which
+    leaves the four probability dicts empty)."""
+
     present: list  # present constellation labels, ascending
     sources: dict  # c -> list of valid source indices
-    p_none: dict
+    p_none: dict  # c -> P_none_c
     p_single: dict  # l -> P_single_l (only for constellations with >= 2 sources)
-    p_whole: dict
-    p_fault: dict
-    order: int
+    p_whole: dict  # c -> P_whole_c
+    p_fault: dict  # c -> P_f,c = 1 - P_none_c
+    order: int  # r, the most constellations (events) a monitored mode stands for
     p_no_fault: float  # prod_c P_none_c
     p_beyond_order: float  # P(more than r constellations faulty)
-    modes: list = field(default_factory=list)
+    modes: list = field(default_factory=list)  # Mode of every candidate, enumeration order
 
 
 def _inputs(valid, constellation, p_sat, p_const):
@@ -290,6 +294,9 @@ def wls_projector(g, constellation, kept, var_int, singular_rtol=SINGULAR_RTOL):
 
 @dataclass
 class ModeSolution:
+    """The weighted least-squares solution of one fault mode (or the all-in-view one), seed 004
+    eqs. (9)-(12), per axis east, north, up (m)."""
+
     mode: Mode | None  # None for the all-in-view solution
     s_pos: np.ndarray  # (3, L) position rows of S^(i), zero outside the kept rows
     sigma: np.ndarray  # (3,) eq. (9)
@@ -300,20 +307,23 @@ class ModeSolution:
 
 @dataclass
 class Result:
-    hpl_m: float
-    vpl_m: float
-    emt_m: float
-    sigma_acc_u_m: float
-    n_modes: int
-    p_not_monitored: float
-    status: int
-    order: int
-    pl_enu_m: np.ndarray
+    """What ``protection_levels_reference`` finds for one geometry; on a failure the levels are
+    inf and ``status`` says why (the codes of ``araim.Status``)."""
+
+    hpl_m: float  # horizontal protection level, hypot of the east and north PLs
+    vpl_m: float  # vertical protection level, eq. (16)
+    emt_m: float  # effect of monitor threshold: largest vertical threshold, prior >= P_EMT
+    sigma_acc_u_m: float  # vertical accuracy sigma of the all-in-view solution (C_acc)
+    n_modes: int  # N_f, the monitored modes
+    p_not_monitored: float  # P_NM: beyond the order plus the singular modes' priors
+    status: int  # OK, TOO_FEW_SOURCES, SINGULAR_GEOMETRY or UNMONITORED_RISK
+    order: int  # the fault-mode order r
+    pl_enu_m: np.ndarray  # (3,) the PL of each axis, eq. (14) east/north, (16) up
     fault_modes: FaultModeSet
-    all_in_view: ModeSolution | None
+    all_in_view: ModeSolution | None  # None when too few sources
     monitored: list  # ModeSolution of the monitorable modes, in enumeration order
     singular: list  # Mode of the candidate modes that are singular
-    k_fa: np.ndarray  # (3,)
+    k_fa: np.ndarray  # (3,) false-alarm multipliers K_fa of eq. (12)
     borderline: bool = False  # some mode's (or the all-in-view) singularity test is borderline
     position_adjusted: bool = False  # PLs of the Blanch et al. (2015) estimator
 
@@ -502,10 +512,13 @@ def pl_equation(res, budget, q, pl):
 
 @dataclass
 class Separation:
-    result: Result
+    """Eq. (13) for one geometry and residual vector: the solution separations of the
+    monitored modes, their test statistics and whether any exceeds its threshold."""
+
+    result: Result  # the protection levels of the same geometry
     separation: np.ndarray  # (N_f, 3) ((S^(i) - S^(0)) y)_q of the monitored modes
     tau: np.ndarray  # (N_f, 3) eq. (13)
-    detected: bool
+    detected: bool  # some tau > 1
     excluded: list  # frozensets, the excluded sources of each monitored mode
 
 
@@ -538,7 +551,9 @@ def solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_s
 
 @dataclass
 class FDE:
-    detected: bool
+    """Detection and exclusion for one geometry (``detect_and_exclude_reference``)."""
+
+    detected: bool  # the all-in-view solution separation test fired
     excluded: np.ndarray  # (L,) bool, sources excluded
     pl: Result  # the result after exclusion (all-in-view when nothing was detected)
     status: int | None  # None: exclusion failed (the implementation picks the code)

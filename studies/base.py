@@ -14,28 +14,37 @@ class Param:
     """One ``--set KEY=VALUE`` parameter: its default, a parser that validates, and its meaning."""
 
     default: Any
-    parse: Callable[[str, Any], Any]  # (name, raw value) -> value, raises ValueError naming name
+    """The value used when the user sets none."""
+    parse: Callable[[str, Any], Any]
+    """``(name, raw value) -> value``; raises ValueError naming ``name`` when invalid."""
     doc: str
+    """What the parameter means, one line (``oaraim list`` prints it)."""
     unit: str = ""
+    """Its unit, e.g. ``"m"`` or ``"deg"`` ("" when it has none)."""
 
 
 def probability(name, v):
+    """Parser of a probability parameter: a float strictly inside (0, 1)."""
     return check_probability(name, v)
 
 
 def positive(name, v):
+    """Parser of a parameter that must be a finite float > 0."""
     return check_positive(name, v)
 
 
 def non_negative(name, v):
+    """Parser of a parameter that must be a finite float >= 0."""
     return check_positive(name, v, allow_zero=True)
 
 
 def count(minimum, maximum=None):
+    """Parser of an integer parameter in ``minimum..maximum`` (no upper bound if None)."""
     return lambda name, v: check_int(name, v, minimum, maximum)
 
 
 def in_range(lo, hi):
+    """Parser of a float parameter in [``lo``, ``hi``]."""
     return lambda name, v: check_range(name, v, lo, hi)
 
 
@@ -130,10 +139,17 @@ def axis(parse_one):
 @dataclass
 class StudyResult:
     """What a study's run returns: its dataset, summary rows, metrics and extra provenance."""
-    dataset: Any  # xarray.Dataset
-    rows: list  # [{"quantity", "unit", "published", "reproduced", "note"}]
+
+    dataset: Any
+    """The ``xarray.Dataset`` stored as ``OUT/STUDY/data.zarr`` (what ``plot`` reads)."""
+    rows: list
+    """The summary rows, each ``{"quantity", "unit", "published", "reproduced", "note"}``:
+    a published number of the seed paper beside ours (``published`` None where the paper
+    prints none)."""
     metrics: dict
+    """Named numbers of the run (JSON values), stored in summary.json."""
     extra_provenance: dict = field(default_factory=dict)
+    """Study-specific entries added to provenance.json."""
 
 
 class Study:
@@ -189,9 +205,16 @@ class Study:
         return None
 
     def run(self, params: dict, realizations: int, seed: int, progress) -> StudyResult:
+        """Compute the study: ``params`` as ``validate`` returns them, ``realizations`` draws
+        from ``seed`` (``mc.keys``: the same seed gives the same result), ``progress`` an
+        object with ``advance(n)`` (``mc.progress.ProgressBar``) to count realizations done.
+        Returns the dataset, summary rows and metrics; writes nothing (``oaraim.execute``
+        stores them in ``OUT/STUDY/``)."""
         raise NotImplementedError
 
     def plot(self, out_dir) -> list:
+        """Draw the figures from the stored results in ``out_dir`` (``data.zarr``, never
+        recomputed) into ``out_dir``; returns the paths of the files written."""
         raise NotImplementedError
 
 
@@ -210,22 +233,32 @@ class SweepStudy(Study):
     axis_names: tuple = ()
 
     def realization_limit(self) -> int | None:
+        """None: a sweep has no bound on realizations."""
         return None  # chunked to disk (``mc.sweep``): no bound
     key_axes: tuple = ()
     chunk_param: str = "chunk"  # the parameter giving realizations per task / chunk file
 
     def axes(self, params) -> tuple:
+        """The grid: one ``mc.sweep.Axis`` per name of ``axis_names``, with the values of the
+        parameter of that name (a tuple, parsed by ``axis(...)``)."""
         from oaraim.mc.sweep import Axis
 
         return tuple(Axis(k, tuple(params[k])) for k in self.axis_names)
 
     def kernel(self, params, coords):
+        """The kernel of one cell: ``coords`` (axis name -> value) -> a function of a
+        ``(batch_size(params),)`` key array returning a dict of ``(batch,)`` arrays, the
+        outputs the reducers read. Jit it; it is built once per cell and process."""
         raise NotImplementedError
 
     def reducers(self, params) -> tuple:
+        """The reducers of the kernel's outputs (``mc.reduce``: ``Mean``, ``Max``,
+        ``Histogram``, ``EmpiricalCDF``, ...), one dataset variable each per cell."""
         raise NotImplementedError
 
     def finish(self, params, dataset, realizations, seed) -> StudyResult:
+        """The reduced grid (``SweepResult.dataset``: dims = axis names, one variable per
+        reducer output) -> the study's ``StudyResult`` (dataset to store, rows, metrics)."""
         raise NotImplementedError
 
     def chunk_size(self, params) -> int:

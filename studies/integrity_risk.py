@@ -60,6 +60,7 @@ EST_FIELDS = ("p_md", "se_md", "hits_md", "upper_md", "p_we", "se_we", "mu_norm"
 
 
 def n_slots(params):
+    """GPS source slots L of the sky table (the most satellites in view over the day)."""
     table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
     return table["az_rad"].shape[1]
 
@@ -70,6 +71,9 @@ def n_scenarios(params):
 
 
 def outputs():
+    """{name: dtype} of the kernel's outputs per realization: the geometry, scenario and
+    magnitude indices, its PLs and status, and per direction (``_h``, ``_v``) the mode, prior,
+    A_det / A_PL, magnitude and the importance-sampling estimate (``EST_FIELDS``)."""
     out = {"geometry": "int32", "epoch": "int32", "scenario": "int16", "kind": "int8",
            "source": "int16", "constellation": "int8", "x": "float64", "scale": "int8",
            "hpl_m": "float64",
@@ -118,6 +122,8 @@ class RiskCell:
         self.cache = {}
 
     def table(self, g, key):
+        """Every output of geometry ``g`` as (scenario slots, 2 len(x_grid)) arrays: its MHSS
+        maps and ``ir.risk_table``, computed once (the last 4 geometries are cached)."""
         if g in self.cache:
             return self.cache[g]
         kg = mc.stream(key, "risk_geometry", g)
@@ -277,6 +283,9 @@ def _save(fig, path):
 
 
 class IntegrityRisk(SweepStudy):
+    """The ``integrity-risk`` study (module docstring): one sweep cell per SOP count, every
+    (geometry, scenario slot, magnitude) a realization."""
+
     name = "integrity-risk"
     title = ("Measured integrity risk of the MHSS PLs by fault injection and importance "
              "sampling, seed 004 Table I with and without SOPs")
@@ -321,19 +330,25 @@ class IntegrityRisk(SweepStudy):
     }
 
     def check(self, p):
+        """The BPP annulus: d_min_m < d_max_m, h_min_m <= h_max_m."""
         c.check_geometry_params(p)
 
     def fixed_realizations(self, params):
+        """geometries x scenario slots x magnitudes (x_grid in units of A_det, then A_PL)."""
         return params["geometries"] * n_scenarios(params) * 2 * len(params["x_grid"])
 
     def kernel(self, params, coords):
+        """The index kernel of the cell with ``coords["n_sops"]`` SOPs (``RiskCell``)."""
         return RiskCell(params, coords["n_sops"])
 
     def reducers(self, params):
+        """``Values`` of every output: each realization kept."""
         n = self.fixed_realizations(params)
         return tuple(Values(k, n, dtype) for k, dtype in outputs().items())
 
     def finish(self, params, ds, realizations, seed):
+        """Measured risk per geometry against the allocation (with and without the
+        unmonitored modes), the crude Monte Carlo cross-check and the SOP tower ramps."""
         from oaraim.mc.keys import cell_key
 
         G, S, X = params["geometries"], n_scenarios(params), 2 * len(params["x_grid"])
@@ -478,6 +493,8 @@ class IntegrityRisk(SweepStudy):
                                                  "weak_budget_cross_check_timing": timing})
 
     def plot(self, out_dir):
+        """risk_vs_magnitude.png (P(HMI) per scenario against |f|), risk_ratio_cdf.png
+        (measured / allocated over geometries) and, with SOPs, sop_ramp_risk.png."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False).load()

@@ -291,6 +291,9 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
 
 
 class RinexReplay(Study):
+    """The ``rinex-replay`` study (module docstring): one realization per epoch of a real
+    observation file."""
+
     name = "rinex-replay"
     requires_data = True  # real observation files only (generic tests skip without them)
     title = "Real GNSS data: snapshot slope RAIM and ARAIM (MHSS), HPE vs HPL, Stanford diagram"
@@ -300,6 +303,7 @@ class RinexReplay(Study):
     quick_realizations = 2880
 
     def data_files(self, params):
+        """The default observation and navigation files when ``obs``/``nav`` are 'auto'."""
         return data_files(params["obs"], params["nav"])
 
     params = {
@@ -335,6 +339,8 @@ class RinexReplay(Study):
     }
 
     def run(self, params, realizations, seed, progress):
+        """Replay the first ``realizations`` epochs: pseudoranges corrected, WNLS, slope RAIM
+        and MHSS with exclusion, errors against the truth (``seed`` is not used)."""
         obs_path, nav_path = resolve_files(params["obs"], params["nav"])
         obs = rinex_obs.read_observations(obs_path, max_epochs=int(realizations),
                                           lenient=params["bad_epochs"] == "skip")
@@ -429,6 +435,8 @@ class RinexReplay(Study):
             "fault_modes": params["fault_modes"]})
 
     def plot(self, out_dir):
+        """hpe_hpl_time.png (errors and protection levels over the day) and
+        stanford_diagram.png (horizontal: HPE against HPL, MHSS and slope RAIM)."""
         import matplotlib.pyplot as plt
         from matplotlib.colors import LogNorm
 

@@ -33,6 +33,9 @@ from oaraim.studies.common.ekf_drive import EkfDriveStudy
 
 
 class Seed000EkfRaim(EkfDriveStudy):
+    """The ``seed000-ekf-raim`` study (module docstring): ``EkfDriveStudy`` on
+    ``sim.drive_seed000`` with seed 000's published numbers."""
+
     name = "seed000-ekf-raim"
     title = "Seed 000 EKF-RAIM, 1.35 km drive"
     seed_file = "000_da291ac15380f45f.txt"

@@ -46,6 +46,9 @@ def fig3_kernel(keys, n_gps, mask_rad, el_grid_rad, sigma_gps_m, sigma_added_m):
 
 
 class Fig3Elevation(Study):
+    """Seed 001 Fig. 3 (module docstring): the histogram of the HPL-minimising elevation el*
+    of an added transmitter."""
+
     name = "seed001-fig3-elevation"
     title = "Seed 001 Fig. 3: elevation of an added transmitter that minimises the HPL"
     seed_file = "001_c7da69deb44e932b.txt"
@@ -63,10 +66,12 @@ class Fig3Elevation(Study):
     }
 
     def el_grid_deg(self, params):
+        """The elevation sweep 0, el_step_deg, ... up to 90 deg (deg)."""
         n = int(np.floor(90.0 / params["el_step_deg"] + 1e-9))
         return np.arange(n + 1) * params["el_step_deg"]
 
     def run(self, params, realizations, seed, progress):
+        """Histogram of el* over the realizations, its mode and the share at 0 deg."""
         grid_deg = self.el_grid_deg(params)
         step = params["el_step_deg"]
         hist = Histogram("el_star_deg",
@@ -109,6 +114,7 @@ class Fig3Elevation(Study):
         return StudyResult(ds, rows, metrics)
 
     def plot(self, out_dir):
+        """fig3_elevation_histogram.png: share of realizations per el* bin, 0 deg in red."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False).load()

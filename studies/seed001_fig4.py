@@ -88,6 +88,9 @@ def matching_hal(hpl, target_availability):
 
 
 class Fig4HplCdf(Study):
+    """Seed 001 Fig. 4 (module docstring): slope-RAIM HPL cdfs of M GPS + N GNSS satellites
+    against M GPS + N SOP towers."""
+
     name = "seed001-fig4-hpl-cdf"
     title = "Seed 001 Fig. 4: HPL cdfs, 5 GPS + 4 GNSS vs 5 GPS + 4 SOPs"
     seed_file = "001_c7da69deb44e932b.txt"
@@ -111,9 +114,12 @@ class Fig4HplCdf(Study):
     }
 
     def check(self, p):
+        """The BPP annulus: d_min_m < d_max_m, h_min_m <= h_max_m."""
         check_bpp_annulus(p)
 
     def run(self, params, realizations, seed, progress):
+        """Both HPLs of every realization: their cdfs, availabilities at HAL, the GNSS HAL of
+        equal availability, and the sensitivity table."""
         dof = params["n_gps"] + params["n_added"] - 4
         lam = lambda_det_table(params["p_fa"], params["p_md"], dof)[dof]
         scale = float(np.sqrt(lam))
@@ -202,6 +208,7 @@ class Fig4HplCdf(Study):
         return rows
 
     def plot(self, out_dir):
+        """fig4_hpl_cdf.png: the two HPL cdfs with HAL and the matching GNSS HAL marked."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)

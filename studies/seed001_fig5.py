@@ -81,6 +81,7 @@ def parse_receiver(name, v):
 
 
 def parse_date(name, v):
+    """Parser of the ``date`` parameter: 'auto' or a valid day YYYY-MM-DD (normalised)."""
     v = str(v).strip()
     if v == "auto":
         return v
@@ -159,6 +160,9 @@ def episodes(hpl_m, threshold_m, step_s):
 
 
 class Fig5Madrid24h(Study):
+    """Seed 001 Fig. 5 (module docstring): slope HPL over 24 h at MDSCC, GPS only and GPS + 5
+    BPP SOP towers (the mean over ``--realizations`` tower draws per epoch)."""
+
     name = "seed001-fig5-madrid-24h"
     title = "Seed 001 Fig. 5: GPS-only vs GPS + 5 SOPs HPL over 24 h at MDSCC"
     seed_file = "001_c7da69deb44e932b.txt"
@@ -192,6 +196,7 @@ class Fig5Madrid24h(Study):
     }
 
     def check(self, p):
+        """The BPP annulus: d_min_m < d_max_m, h_min_m <= h_max_m."""
         check_bpp_annulus(p)
 
     def sky(self, params):
@@ -217,6 +222,8 @@ class Fig5Madrid24h(Study):
         return t, np.asarray(s.az_rad), np.asarray(s.el_rad), np.asarray(s.valid), desc, real
 
     def run(self, params, realizations, seed, progress):
+        """Per epoch: the GPS-only HPL and the GPS + SOP HPL of each tower draw (its mean,
+        5 % and 95 % over the draws); the 24-h means and the > hpl_threshold_m episodes."""
         t, az, el, valid, sky_desc, real = self.sky(params)
         n_vis = valid.sum(-1)
         n_slots = next((k for k in GPS_SLOTS if k >= n_vis.max()), az.shape[-1])
@@ -335,6 +342,8 @@ class Fig5Madrid24h(Study):
                                                                 "real_ephemeris": bool(real)})
 
     def plot(self, out_dir):
+        """fig5_hpl_24h.png: both HPLs over the day (the 5-95 % band of the tower draws) and
+        the GPS satellites in view."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)

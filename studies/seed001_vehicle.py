@@ -56,6 +56,7 @@ DRIVES = {"seed000-drive": "drive_seed000", "seed002-drive": "drive_seed002"}
 
 
 def parse_drive(name, v):
+    """Parser of the ``drive`` parameter: a name of ``DRIVES``."""
     v = str(v).strip()
     if v not in DRIVES:
         raise ValueError(f"{name} must be one of {', '.join(DRIVES)}, got {v!r}")
@@ -63,6 +64,9 @@ def parse_drive(name, v):
 
 
 class Seed001Vehicle(Study):
+    """Seed 001 section 4.2 (module docstring): mean slope HPL along a drive, GPS only and
+    GPS + 5 LTE towers."""
+
     name = "seed001-vehicle"
     title = "Seed 001 section 4.2: vehicle drive, GPS + 5 LTE towers, mean slope HPL"
     seed_file = "001_c7da69deb44e932b.txt"
@@ -119,6 +123,8 @@ class Seed001Vehicle(Study):
         return geom, pr0, np.where(geom.valid, geom.tx_clock_m, 0.0), desc, False
 
     def run(self, params, realizations, seed, progress):
+        """Replay each noise draw of the drive (a recording: once) with slope RAIM, GPS only
+        and GPS + LTE: mean and max HPL and HPE, alarms; draw 0 kept as the trace."""
         geom, pr0, corr, desc, recorded = self.inputs(params)
         n_t, n_l = geom.valid.shape
         n_draws = 1 if recorded else int(realizations)
@@ -237,6 +243,8 @@ class Seed001Vehicle(Study):
             "recording": params["recording"]})
 
     def plot(self, out_dir):
+        """vehicle_hpl.png: both HPLs and HPEs of draw 0 over time, and the drive with its
+        towers. Returns the file name only, not its path as the other studies do."""
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt

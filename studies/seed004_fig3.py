@@ -32,6 +32,9 @@ from oaraim.studies.common.seed004 import TOL_M, Fig4Cell
 
 
 class Fig3OneSop(SweepStudy):
+    """Seed 004 Fig. 3 (module docstring): the HPL and VPL increase from adding one SOP, one
+    sweep cell per (P_s^S, sigma_URA^S)."""
+
     name = "seed004-fig3-one-sop"
     title = "Seed 004 Fig. 3: PL increase after adding one SOP, P_s^S = 1e-7 ... 1e-1"
     seed_file = "004_55e51818ceb3e5a9.txt"
@@ -49,12 +52,16 @@ class Fig3OneSop(SweepStudy):
     }
 
     def check(self, p):
+        """The BPP annulus: d_min_m < d_max_m, h_min_m <= h_max_m."""
         c.check_geometry_params(p)
 
     def kernel(self, params, coords):
+        """Seed 004's Fig. 4 kernel with one SOP (``Fig4Cell``, n_sops = 1)."""
         return Fig4Cell(params, {**coords, "n_sops": 1})
 
     def reducers(self, params):
+        """Mean and smallest PL increases where both PLs are finite, the mean GPS-only HPL
+        and counts (finite, raised, order 2)."""
         return (Mean("hpl_increase_m", where="both_finite"),
                 Mean("vpl_increase_m", where="vpl_both_finite"),
                 Min("hpl_increase_m", where="both_finite"),
@@ -64,6 +71,8 @@ class Fig3OneSop(SweepStudy):
                 Count("vpl_raised"), Count("order_2"))
 
     def finish(self, params, ds, realizations, seed):
+        """Rows: share of realizations where one SOP raises each PL, growth with P_s^S while
+        the order is 1, the first P_s^S of order 2, the mean increase per P_s^S."""
         table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         p_s = ds["p_s_sop"].values
         h = ds["hpl_increase_m_mean"].isel(sigma_ura_sop_m=0).values
@@ -119,6 +128,8 @@ class Fig3OneSop(SweepStudy):
         return StudyResult(ds, rows, metrics, {"sky_source": table["description"]})
 
     def plot(self, out_dir):
+        """fig3_pl_increase_one_sop.png: mean and smallest HPL and VPL increase against
+        P_s^S."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)

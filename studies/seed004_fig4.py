@@ -55,6 +55,9 @@ def monotone_share(red_m):
 
 
 class Fig4HplMaps(SweepStudy):
+    """Seed 004 Fig. 4 (module docstring): the mean HPL reduction from N SOPs, one sweep
+    cell per (n_sops, P_s^S, sigma_URA^S)."""
+
     name = "seed004-fig4-hpl-maps"
     title = "Seed 004 Fig. 4: mean HPL reduction over sigma_URA^S x P_s^S, 2-8 SOPs"
     seed_file = "004_55e51818ceb3e5a9.txt"
@@ -79,18 +82,24 @@ class Fig4HplMaps(SweepStudy):
     }
 
     def check(self, p):
+        """The BPP annulus: d_min_m < d_max_m, h_min_m <= h_max_m."""
         c.check_geometry_params(p)
 
     def kernel(self, params, coords):
+        """GPS-only and GPS + SOP PLs of one cell (``studies.common.seed004.Fig4Cell``)."""
         return Fig4Cell(params, coords)
 
     def reducers(self, params):
+        """Mean HPL and VPL reductions and both HPLs where finite, GPS in view, and counts
+        (finite, reduced, order 2)."""
         return (Mean("hpl_reduction_m", where="both_finite"),
                 Mean("vpl_reduction_m", where="vpl_both_finite"),
                 Mean("hpl_gps_m", where="both_finite"), Mean("hpl_sop_m", where="both_finite"),
                 Mean("n_gps"), Count("both_finite"), Count("hpl_reduced"), Count("order_2"))
 
     def finish(self, params, ds, realizations, seed):
+        """The paper's findings (i)-(iv) and its closing remark checked on the reduction
+        maps (module docstring)."""
         table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         red = ds["hpl_reduction_m_mean"]  # (n_sops, p_s, sigma)
         sig = ds["sigma_ura_sop_m"].values
@@ -160,6 +169,8 @@ class Fig4HplMaps(SweepStudy):
         return StudyResult(ds, rows, metrics, {"sky_source": table["description"]})
 
     def plot(self, out_dir):
+        """fig4_hpl_reduction_maps.png: one panel per SOP count, the mean HPL reduction over
+        sigma_URA^S x P_s^S (red where the HPL increases)."""
         import matplotlib.pyplot as plt
         from matplotlib.colors import ListedColormap
 

@@ -139,6 +139,9 @@ def theorem_kernel(keys, n_gps, fault_modes=c.FAULT_MODES):
 
 
 class TheoremCell:
+    """The kernel of one cell: keys -> ``theorem_kernel``'s flags for ``coords["n_gps"]``
+    GPS satellites (picklable for Dask)."""
+
     def __init__(self, params, coords):
         self.n_gps = int(coords["n_gps"])
         self.fault_modes = params["fault_modes"]
@@ -148,6 +151,9 @@ class TheoremCell:
 
 
 class Theorems(SweepStudy):
+    """Seed 004 Theorems 1 and 2 (module docstring) checked per realization, one sweep cell
+    per GPS satellite count."""
+
     name = "seed004-theorems"
     title = "Seed 004 Theorems 1-2: one SOP in its own constellation, random geometries"
     seed_file = "004_55e51818ceb3e5a9.txt"
@@ -166,9 +172,12 @@ class Theorems(SweepStudy):
     }
 
     def kernel(self, params, coords):
+        """``TheoremCell`` of ``coords["n_gps"]``."""
         return TheoremCell(params, coords)
 
     def reducers(self, params):
+        """Counts of each flag (hypotheses met, each theorem and its parts) and the extreme
+        and mean magnitudes where the hypotheses hold."""
         flags = ("hypotheses", "theorem_1", "theorem_2", "sep_unchanged", "thresholds_raised",
                  "tau_not_increased", "sop_undetectable", "detection_implied", "sop_fault_big",
                  "sop_fault_big_detected_by_own_mode", "old_detected")
@@ -182,6 +191,8 @@ class Theorems(SweepStudy):
                 Mean("vpl_increase_m", where="hypotheses"))
 
     def finish(self, params, ds, realizations, seed):
+        """Share of realizations meeting the hypotheses, and where they do, the share where
+        each theorem holds and its largest violations."""
         tot = lambda v: int(ds[v].sum())  # noqa: E731
         n_all = realizations * ds.sizes["n_gps"]
         hyp = tot("hypotheses_count")
@@ -226,6 +237,8 @@ class Theorems(SweepStudy):
         return StudyResult(ds, rows, metrics)
 
     def plot(self, out_dir):
+        """theorems.png: share where each theorem holds, and the PL increases, against the GPS
+        satellite count."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)

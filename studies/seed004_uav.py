@@ -90,6 +90,7 @@ SLOPE_ONLY = snapshot.ReplayConfig(monitors=("slope",))
 
 
 def parse_prn(name, v):
+    """Parser of ``fault_prn``: 'auto' or a GPS PRN 1..32 (an int)."""
     v = str(v).strip()
     if v == "auto":
         return v
@@ -103,6 +104,7 @@ def parse_prn(name, v):
 
 
 def parse_bool(name, v):
+    """Parser of a yes/no parameter: a bool, or true/false, yes/no, on/off, 1/0."""
     if isinstance(v, bool):
         return v
     s = str(v).strip().lower()
@@ -189,6 +191,9 @@ def _blocks(n_t, size):
 
 
 class Seed004Uav(Study):
+    """Seed 004 section VII (module docstring): the UAV flight, snapshot OARAIM per epoch with
+    GPS + the first n of 11 LTE towers, n = 0..11 (Figs. 6-9)."""
+
     name = "seed004-uav"
     title = "Seed 004 section VII: UAV, GPS + up to 11 LTE towers, OARAIM HPE/HPL (Figs. 6-9)"
     seed_file = "004_55e51818ceb3e5a9.txt"
@@ -234,6 +239,8 @@ class Seed004Uav(Study):
     }
 
     def run(self, params, realizations, seed, progress):
+        """The first ``realizations`` epochs: WNLS and MHSS HPL per SOP configuration, GPS +
+        all SOPs with exclusion (Fig. 6), the Fig. 7 ramp and the detectable bias."""
         self.fault_modes = params["fault_modes"]
         geom, pr, corr, desc = synthesize(params, seed)
         n_t = min(int(realizations), geom.t_s.size)
@@ -567,6 +574,9 @@ class Seed004Uav(Study):
 
     # ----------------------------------------------------------------- plots
     def plot(self, out_dir):
+        """fig6_hpe_hpl.png, fig7_detection_sensitivity.png, fig8_hpl_reduction.png and
+        fig9_stanford.png (Figs. 6-9). Returns the file names only, not their paths as the
+        other studies do."""
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt

@@ -43,9 +43,16 @@ def test_no_package_file_above_the_line_limit(rep):
     assert rep["over_max_lines"] == [], f"files above {rep['max_lines']} lines"
 
 
+def test_every_public_function_class_and_method_has_a_docstring(rep):
+    """Issue 26 item 7: what mkdocstrings renders says what it is (private modules and names,
+    and dunders such as ``__init__``, are not asked)."""
+    assert rep["undocumented"] == []
+
+
 def test_the_check_finds_what_it_looks_for(structure, tmp_path):
-    """On a made-up tree: a private import, a lazy-import cycle and a long file are all found,
-    and a package __init__ gathering its own private module is not a violation."""
+    """On a made-up tree: a private import, a lazy-import cycle, a long file and a public
+    function without a docstring are all found, and a package __init__ gathering its own
+    private module is not a violation."""
     (tmp_path / "pyproject.toml").write_text(textwrap.dedent("""
         [tool.setuptools.package-dir]
         "pkg" = "pkg"
@@ -54,9 +61,23 @@ def test_the_check_finds_what_it_looks_for(structure, tmp_path):
     (tmp_path / "pkg").mkdir()
     (tmp_path / "sub").mkdir()
     (tmp_path / "pkg" / "__init__.py").write_text("from pkg._impl import thing\n")
-    (tmp_path / "pkg" / "_impl.py").write_text("thing = 1\n")
     (tmp_path / "pkg" / "a.py").write_text(
         "from pkg.sub import b\n\ndef f():\n    return b._hidden\n")
+    (tmp_path / "pkg" / "_impl.py").write_text(
+        "thing = 1\n\ndef in_a_private_module():\n    pass\n")
+    (tmp_path / "pkg" / "c.py").write_text(textwrap.dedent('''
+        class C:
+            """Documented."""
+
+            def __init__(self):
+                pass
+
+            def m(self):
+                pass
+
+            def _helper(self):
+                pass
+    '''))
     (tmp_path / "sub" / "__init__.py").write_text("")
     (tmp_path / "sub" / "b.py").write_text(
         "def g():\n    from pkg import a  # lazy, still an edge\n    return a\n"
@@ -65,3 +86,4 @@ def test_the_check_finds_what_it_looks_for(structure, tmp_path):
     assert rep["private_imports"] == ["pkg.a:4: b._hidden"]
     assert rep["cycles"] == [["pkg.a", "pkg.sub.b"]]
     assert [m for m, _ in rep["over_max_lines"]] == ["pkg.sub.b"]
+    assert rep["undocumented"] == ["pkg.a.f", "pkg.c.C.m", "pkg.sub.b.g"]

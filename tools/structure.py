@@ -1,4 +1,5 @@
-"""The structure check of docs/design.md: private names across files, import cycles, file sizes.
+"""The structure check of docs/design.md: private names across files, import cycles, file sizes,
+docstrings.
 
     python tools/structure.py            # report; exit status 1 if a rule is broken
     python tools/structure.py --json     # the numbers, for docs/design.md and the tests
@@ -20,6 +21,11 @@ with ``ast`` and imports nothing, so it also runs on a tree that does not import
   docs/design.md draws): each module belongs to one layer (``layer_of``), and a layer may import
   itself and the layers listed for it, nothing else.
 - The *largest file* is counted in lines; the rule is at most ``MAX_LINES``.
+- An *undocumented* name is a public function or class at the top level of a public module, or
+  a public method of such a class, without a docstring (``ast.get_docstring``). A module is
+  public when no component of its dotted name starts with "_" (a package ``__init__`` counts
+  as its package); a name is public when it does not start with "_" (dunders included, so
+  ``__init__`` needs none).
 """
 
 from __future__ import annotations
@@ -162,6 +168,25 @@ def _gathers(mod: str, is_pkg: bool, target: str) -> bool:
     return is_pkg and target.startswith(mod + ".")
 
 
+def undocumented(root: Path = ROOT) -> list[str]:
+    """Dotted names of the public functions, classes and methods without a docstring."""
+    out = []
+    defs = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)
+    for mod, path in modules(root).items():
+        if any(part.startswith("_") for part in mod.split(".")):
+            continue
+        for node in ast.parse(path.read_text(), filename=str(path)).body:
+            if not isinstance(node, defs) or node.name.startswith("_"):
+                continue
+            if not ast.get_docstring(node):
+                out.append(f"{mod}.{node.name}")
+            if isinstance(node, ast.ClassDef):
+                out.extend(f"{mod}.{node.name}.{sub.name}" for sub in node.body
+                           if isinstance(sub, defs[:2]) and not sub.name.startswith("_")
+                           and not ast.get_docstring(sub))
+    return out
+
+
 def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan, iterative)."""
     index, low, on, stack, out = {}, {}, set(), [], []
@@ -204,7 +229,7 @@ def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
 
 
 def report(root: Path = ROOT) -> dict:
-    """The numbers: private cross-file imports, cycles, the largest files."""
+    """The numbers: private cross-file imports, cycles, the largest files, undocumented names."""
     edges, private, sizes = scan(root)
     cyc = cycles(edges)
     layers = sorted(
@@ -221,6 +246,7 @@ def report(root: Path = ROOT) -> dict:
         "largest": [[m, n] for m, n in largest[:10]],
         "over_max_lines": [[m, n] for m, n in largest if n > MAX_LINES],
         "max_lines": MAX_LINES,
+        "undocumented": undocumented(root),
     }
 
 
@@ -245,8 +271,12 @@ def main(argv=None) -> int:
         print(f"files above {MAX_LINES} lines: {len(rep['over_max_lines'])}")
         for m, n in rep["over_max_lines"]:
             print(f"  {m}: {n}")
+        print(f"public functions, classes and methods without a docstring: "
+              f"{len(rep['undocumented'])}")
+        for name in rep["undocumented"]:
+            print("  " + name)
     broken = (rep["private_imports"] or rep["cycles"] or rep["layer_violations"]
-              or rep["over_max_lines"])
+              or rep["over_max_lines"] or rep["undocumented"])
     return 1 if broken else 0
 
 

@@ -388,6 +388,9 @@ def _p(value, parse, doc, unit=""):
 
 
 class AvailabilityMap(SweepStudy):
+    """The ``availability-map`` study (module docstring): one sweep cell per latitude, every
+    (longitude, epoch) of the row a realization."""
+
     name = "availability-map"
     title = "ARAIM / OARAIM availability and coverage map (MAAST-style), GNSS + optional SOPs"
     seed_file = "004_55e51818ceb3e5a9.txt"
@@ -473,6 +476,8 @@ class AvailabilityMap(SweepStudy):
     }
 
     def check(self, p):
+        """The BPP annulus, at least one constellation, towers or a BPP density (not both),
+        and fewer than 2^31 realizations per row."""
         check_bpp_annulus(p)
         if p["gps"] == "none" and p["galileo"] == "none":
             raise ValueError("gps and galileo are both 'none': the map needs at least one "
@@ -485,10 +490,13 @@ class AvailabilityMap(SweepStudy):
                              "longitudes or a longer step_s")
 
     def data_files(self, params):
+        """The MAAST almanacs (``GPS_ALMANAC``, ``GALILEO_ALMANAC``) of the constellations set
+        to ``auto``."""
         return tuple(f for k, f in (("gps", GPS_ALMANAC), ("galileo", GALILEO_ALMANAC))
                      if params.get(k) == "auto")
 
     def epochs(self, params):
+        """Epoch offsets of the day, seconds: 0, step_s, ... below duration_s."""
         return np.arange(0.0, params["duration_s"] - 1e-9, params["step_s"])
 
     def fixed_realizations(self, params):
@@ -496,13 +504,17 @@ class AvailabilityMap(SweepStudy):
         return len(params["lon_deg"]) * len(self.epochs(params))
 
     def kernel(self, params, coords):
+        """The index kernel of the latitude row ``coords["lat_deg"]`` (``MapRow``)."""
         return MapRow(params, coords["lat_deg"])
 
     def reducers(self, params):
+        """``Values`` of every output in ``OUTPUTS``: the whole (longitude, epoch) row kept."""
         n = self.fixed_realizations(params)
         return tuple(Values(k, n, dtype) for k, dtype in OUTPUTS.items())
 
     def finish(self, params, ds, realizations, seed):
+        """The (lat, lon, time) cube, per-point availability and 99.5 % PLs, the coverage and
+        the failure shares (metrics) of the service level."""
         lats = np.asarray(params["lat_deg"])
         lons = np.asarray(params["lon_deg"])
         t = self.epochs(params)
@@ -578,6 +590,7 @@ class AvailabilityMap(SweepStudy):
                                                  "position_opt": params["position_opt"]})
 
     def plot(self, out_dir):
+        """availability_maps.png: availability (MAAST's bands), 99.5 % VPL and HPL maps."""
         import matplotlib.pyplot as plt
         from matplotlib.colors import BoundaryNorm, Normalize
 
