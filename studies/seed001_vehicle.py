@@ -244,7 +244,7 @@ class Seed001Vehicle(Study):
 
     def plot(self, out_dir):
         """vehicle_hpl.png: both HPLs and HPEs of draw 0 over time, and the drive with its
-        towers. Returns the file name only, not its path as the other studies do."""
+        towers, in out_dir; returns its path."""
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
@@ -277,4 +277,4 @@ class Seed001Vehicle(Study):
         fig.tight_layout()
         fig.savefig(f"{out_dir}/vehicle_hpl.png", dpi=130)
         plt.close(fig)
-        return ["vehicle_hpl.png"]
+        return [f"{out_dir}/vehicle_hpl.png"]

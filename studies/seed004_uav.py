@@ -575,8 +575,7 @@ class Seed004Uav(Study):
     # ----------------------------------------------------------------- plots
     def plot(self, out_dir):
         """fig6_hpe_hpl.png, fig7_detection_sensitivity.png, fig8_hpl_reduction.png and
-        fig9_stanford.png (Figs. 6-9). Returns the file names only, not their paths as the
-        other studies do."""
+        fig9_stanford.png (Figs. 6-9) in out_dir; returns their paths."""
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
@@ -671,4 +670,4 @@ class Seed004Uav(Study):
         fig.savefig(f"{out_dir}/fig9_stanford.png", dpi=130)
         plt.close(fig)
         files.append("fig9_stanford.png")
-        return files
+        return [f"{out_dir}/{f}" for f in files]

@@ -1,6 +1,7 @@
 """Studies of seed 001: kernels against the NumPy oracle, published numbers, storage."""
 
 import json
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -164,7 +165,8 @@ def test_run_writes_data_summary_provenance_and_figures(tmp_path, name, request)
         assert set(row) >= {"quantity", "unit", "published", "reproduced", "note"}
     p = json.loads((sdir / "provenance.json").read_text())
     assert p["realizations"] == n and p["seed"] == 0 and p["parameters"]
-    assert figures and all((sdir / f.split("/")[-1]).is_file() for f in figures)
+    # the paths as returned (reproduce --results copies them from there), inside the study folder
+    assert figures and all(Path(f).is_file() and Path(f).parent == sdir for f in figures)
     text = build_report(tmp_path)
     assert name in text and "| quantity | unit | published | reproduced | note |" in text
 
