@@ -36,6 +36,7 @@ from oaraim.araim.mhss import (
     MHSSResult,
     Sources,
     batch_last_inputs,
+    check_options,
     pls_from_projection,
     prepare_inputs,
     project,
@@ -210,12 +211,7 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
 def _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
                  iterations):
     """The static arguments of the public kernels, checked (ValueError before any tracing)."""
-    if not isinstance(budget, IntegrityBudget):
-        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
-                         "araim.BUDGET_SEED004_TABLE_I")
-    if all_in_view_weighting not in ("int", "acc"):
-        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
-                         f"got {all_in_view_weighting!r}")
+    check_options(budget, all_in_view_weighting)
     rule = fault_mode_rule(fault_modes)
     s = Sources(*sources)
     args = (s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat, p_const,
@@ -267,12 +263,7 @@ def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
     weighting checked, and the static order (``required_order`` when None): (args, order).
     ``fault_modes`` is checked by ``fault_mode_rule`` (call it first to get the rule)."""
     rule = fault_mode_rule(fault_modes)
-    if not isinstance(budget, IntegrityBudget):
-        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
-                         "araim.BUDGET_SEED004_TABLE_I")
-    if all_in_view_weighting not in ("int", "acc"):
-        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
-                         f"got {all_in_view_weighting!r}")
+    check_options(budget, all_in_view_weighting)
     args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
                           valid)
     if max_order is None:

@@ -28,6 +28,7 @@ from oaraim.araim.mhss.inputs import (
     UNIT_ROW_TOLERANCE,
     Sources,
     check_inputs,
+    check_options,
     host_inputs,
     prepare_inputs,
 )
@@ -71,6 +72,7 @@ __all__ = [
     "ZERO_SEPARATION_RTOL",
     "batch_last_inputs",
     "check_inputs",
+    "check_options",
     "higher_order_flags",
     "host_inputs",
     "kernel_cache_size",

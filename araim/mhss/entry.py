@@ -34,6 +34,7 @@ from oaraim.araim.mhss.inputs import (
     INPUT_RANGES,
     Sources,
     check_inputs,
+    check_options,
     host_inputs,
     prepare_inputs,
 )
@@ -237,12 +238,7 @@ def protection_levels_kernel(sources: Sources, p_const, budget: IntegrityBudget,
       too few sources, a singular geometry or unmonitored risk their own status. Only a
       malformed static argument raises (ValueError, before tracing the arrays).
     """
-    if not isinstance(budget, IntegrityBudget):
-        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
-                         "araim.BUDGET_SEED004_TABLE_I")
-    if all_in_view_weighting not in ("int", "acc"):
-        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
-                         f"got {all_in_view_weighting!r}")
+    check_options(budget, all_in_view_weighting)
     rule = fault_mode_rule(fault_modes)
     max_order = check_order(rule, check_int("max_order", max_order, 1))
     return _kernel_jit(Sources(*sources), p_const, budget=budget, max_order=max_order,

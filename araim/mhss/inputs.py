@@ -8,10 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
+from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.validate import UNIT_ROW_TOLERANCE, batch_source, check_unit_rows, unit_norm
 
-__all__ = ["INPUT_RANGES", "UNIT_ROW_TOLERANCE", "Sources", "check_inputs", "host_inputs",
-           "in_range", "invalid_input_flags", "prepare_inputs"]
+__all__ = ["INPUT_RANGES", "UNIT_ROW_TOLERANCE", "Sources", "check_inputs", "check_options",
+           "host_inputs", "in_range", "invalid_input_flags", "prepare_inputs"]
 
 
 class Sources(NamedTuple):
@@ -96,6 +97,17 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
 #: bound, exclusive)
 INPUT_RANGES = {"var_int_m2": (0.0, False, np.inf), "var_acc_m2": (0.0, False, np.inf),
                  "b_nom_m": (0.0, True, np.inf), "p_sat": (0.0, True, 1.0)}
+
+
+def check_options(budget, all_in_view_weighting):
+    """The static options every MHSS entry point takes, checked before any tracing: the budget
+    is an ``IntegrityBudget`` and the all-in-view weighting "int" or "acc" (ValueError)."""
+    if not isinstance(budget, IntegrityBudget):
+        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
+                         "araim.BUDGET_SEED004_TABLE_I")
+    if all_in_view_weighting not in ("int", "acc"):
+        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
+                         f"got {all_in_view_weighting!r}")
 
 
 def in_range(x, lo, lo_ok, hi):

@@ -4,32 +4,9 @@
 Written for seed 000 (ION GNSS 2018: EKF-based RAIM of an LTE + IMU ground vehicle); seed 002
 runs the same machinery on its own drive (``studies.seed002_outlier``).
 
-Two parts, both through ``araim``'s EKF-RAIM (NIS detection, subset exclusion, Xi-slope HPL):
-
-1. One drive, for the figures: a synthesized run of ``sim.drive_seed000()`` (fault on
-   tower 1 from t = 25 s) is written in the recorded-drive format (``geometry.write_recording``:
-   Parquet tables + meta.json), loaded back with ``geometry.load_recording`` and replayed by
-   ``araim.ekf_replay.replay_ekf_raim``: exactly the path a user's real drive takes. Fig. 3a
-   (NIS vs threshold), Figs. 3b-c (east/north errors without and with exclusion, +-3 sigma),
-   Fig. 4 (HPL vs HAL with the 2D error). ``--set recording=PATH`` replays the user's recording
-   instead (the Monte Carlo part needs the synthetic scenario and is skipped: stated in the
-   summary). ``--set drive_dir=PATH`` keeps the synthesized recording there (default: a
-   temporary folder, removed after the replay).
-2. Monte Carlo (``--realizations`` runs, default 200, quick 20): one realization = one run of the
-   whole drive (``sim.monte_carlo_drive``: IMU noise and GM biases, receiver clock,
-   pseudorange noise, initial error, both filters). Run i has the key ``mc.realization_keys(seed,
-   0, i, 1)``; runs go through the vmapped kernel in fixed batches of ``MC_BATCH`` keys (the last
-   padded and trimmed), so results are bit-identical for any ``chunk`` (XLA may round otherwise
-   at another batch shape: README "Traps"). The single drive is run 0 of the same seed. The
-   same runs are repeated with a Gauss-Markov multipath error on every tower
-   (``sens_mp_sigma_m``, ``sens_mp_tau_s``) that the filter does not model: the sensitivity.
-
-Choices (the seed is silent; ``sim.trajectory`` notes and ``araim.ekf_raim`` give the
-sources): sigma_pr 2 m white ("meter-level" LTE), fault +30 m on tower 1 from t = 25 s (the onset
-is the seed's detection time, the magnitude our NLOS choice), P_FA 1e-5, P_MD 1e-3, HAL 30 m,
-d = N_s (seed 002; seed 000's N_s - 4 is ``dof=n_s-4``: with 5 towers it leaves the exclusion
-subsets d = 0, so exclusion cannot work, DESIGN.md). VN-100 IMU, OCXO clock. None was tuned
-to the published numbers.
+The two parts (one synthesized drive written, loaded and replayed for the figures; a Monte
+Carlo of whole-drive runs with a multipath sensitivity) and the choices the seeds leave open
+are described once, in the seed 000 study's docstring (``studies.seed000_ekf_raim``).
 """
 
 from __future__ import annotations
