@@ -75,6 +75,15 @@ class _Stream:
         return sum(p[3] for p in self._parts.values())
 
 
+class _Summed(_Stream):
+    """A reducer whose cell state is integer counts: a chunk's partial adds to every one."""
+
+    def accumulate(self, state, part, b0):
+        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
+        for k, v in part.items():
+            state[k] += v
+
+
 def _stream_state():
     return field(default_factory=dict, init=False, repr=False, compare=False, hash=False)
 
@@ -229,7 +238,7 @@ class Min(Max):
 
 
 @dataclass(frozen=True)
-class Histogram(_Stream):
+class Histogram(_Summed):
     """Counts of output ``name`` in the bins ``edges`` (NumPy's convention: the last bin is
     closed). ``{name}_hist`` (int64, extra dimension ``{name}_bin`` with coordinates
     ``{name}_bin_lo``/``{name}_bin_hi``) and ``{name}_outside`` (included realizations outside
@@ -277,11 +286,6 @@ class Histogram(_Stream):
         return {"counts": np.zeros(len(self.edges) - 1, np.int64),
                 "outside": np.zeros(1, np.int64)}
 
-    def accumulate(self, state, part, b0):
-        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
-        state["counts"] += part["counts"]
-        state["outside"] += part["outside"]
-
     def finish(self, state):
         """The dataset variables of one cell from its state."""
         return {f"{self.name}_hist": state["counts"].copy(),
@@ -299,7 +303,7 @@ class Histogram(_Stream):
 
 
 @dataclass(frozen=True)
-class EmpiricalCDF(_Stream):
+class EmpiricalCDF(_Summed):
     """Empirical cdf of output ``name`` on a fixed ``grid``: ``{name}_cdf_count[k]`` = the
     included realizations with a value <= ``grid[k]`` (int64, extra dimension ``{name}_grid``)
     and ``{name}_cdf_total`` (the included realizations). Exact counts. ``inf`` (an unavailable
@@ -343,11 +347,6 @@ class EmpiricalCDF(_Stream):
         """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
         return {"counts": np.zeros(len(self.grid), np.int64), "total": np.zeros(1, np.int64)}
 
-    def accumulate(self, state, part, b0):
-        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
-        state["counts"] += part["counts"]
-        state["total"] += part["total"]
-
     def finish(self, state):
         """The dataset variables of one cell from its state."""
         return {f"{self.name}_cdf_count": state["counts"].copy(),
@@ -377,7 +376,7 @@ class EmpiricalCDF(_Stream):
 
 
 @dataclass(frozen=True)
-class Count(_Stream):
+class Count(_Summed):
     """Number of realizations where the boolean output ``name`` is True (``{name}_count``,
     int64); with ``where``, only among the realizations where that output is True."""
 
@@ -406,10 +405,6 @@ class Count(_Stream):
     def empty(self, n_blocks):
         """A cell's state before any chunk (``n_blocks`` blocks of ``BLOCK``)."""
         return {"count": np.zeros(1, np.int64)}
-
-    def accumulate(self, state, part, b0):
-        """Fold one chunk's partial (first block ``b0``) into a cell's state."""
-        state["count"] += part["count"]
 
     def finish(self, state):
         """The dataset variables of one cell from its state."""
