@@ -344,7 +344,9 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
     if not isinstance(config, ReplayConfig):
         raise ValueError(f"config must be an araim.snapshot.ReplayConfig, got "
                          f"{type(config).__name__}")
-    monitors, budget, fault_modes, max_order, p_fa, p_md, n_iter, frame = config
+    monitors, budget, fault_modes = config.monitors, config.budget, config.fault_modes
+    max_order, p_fa, p_md = config.max_order, config.p_fa, config.p_md
+    n_iter, frame = config.n_iter, config.frame
     bad = set(monitors) - {"slope", "mhss"}
     if bad or not monitors:
         raise ValueError(f"monitors must be a non-empty subset of ('slope', 'mhss'), got "

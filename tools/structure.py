@@ -88,10 +88,7 @@ def modules(root: Path = ROOT) -> dict[str, Path]:
             rel = path.relative_to(folder).with_suffix("")
             parts = [p for p in rel.parts if p != "__init__"]
             name = ".".join([pkg, *parts]) if parts else pkg
-            if any(name.startswith(other + ".") and other != pkg and folder in
-                   package_dirs(root)[other].parents for other in package_dirs(root)):
-                continue  # (a folder nested in another package's folder is that package's)
-            out.setdefault(name, path)
+            out.setdefault(name, path)  # a subpackage's folder is also below its parent's
     return out
 
 
