@@ -115,6 +115,42 @@ def _print_rows(summary):
 
 
 @app.command()
+def calibrate(
+    study: Annotated[str, typer.Argument(help="study name (see `oaraim list`)")],
+    realizations: Annotated[int | None, typer.Option(
+        help="realizations per run (default: the study's calibration size)")] = None,
+    seed: Annotated[int, typer.Option(help="the one seed of every run")] = 0,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="KEY=VALUE parameter held fixed while fitting")] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the fit here")] = None,
+):
+    """Fit the parameters the paper leaves open to its published numbers; print the fitted
+    values, the residuals and their sensitivities."""
+    from oaraim.calibrate import calibrate as fit
+    from oaraim.execute import parse_sets
+    from oaraim.registry import get_study
+
+    try:
+        s = get_study(study)
+        res = fit(s, realizations=realizations, seed=seed, sets=parse_sets(set_),
+                  say=lambda text: err.print(escape(text), highlight=False))
+    except ValueError as e:
+        _fail(str(e))
+    say = lambda text: out.print(escape(text), highlight=False, soft_wrap=True)  # noqa: E731
+    say(f"{res.study}: {res.realizations:,} realizations per run, {res.evaluations} runs, "
+        f"seed {seed}")
+    for k, v in res.fitted.items():
+        say(f"  {k}: fitted {v:.4g} (default {res.defaults[k]:.4g})")
+    for r in res.targets:
+        el = ", ".join(f"{k} {e:+.2f}" for k, e in res.elasticity[r["quantity"]].items())
+        say(f"  {r['quantity']}: published {r['published']:.4g}, at the default "
+            f"{r['at_default']:.4g}, at the fit {r['at_fit']:.4g} ({100 * r['residual']:+.1f} "
+            f"%); elasticity (dT/T)/(dp/p): {el}")
+    if json_out is not None:
+        json_out.write_text(json.dumps(res._asdict(), indent=2) + "\n")
+
+
+@app.command()
 def report(
     out_dir: Annotated[Path, typer.Option("--out", help="folder holding the study runs")] =
     Path("out"),
