@@ -16,9 +16,12 @@ function of theta and
 (``lax.while_loop``, ``lax.cond``) are never differentiated, so ``jax.jvp``, ``jax.grad``
 (JAX transposes the linear rule) and higher derivatives (the rule calls ``implicit_root`` for
 its own primal, so its coefficients are differentiable too) all work, and the forward value is
-the solver's, bit for bit. The rule is evaluated at the returned PL, which lies at most
-``FAST_PROOF_TOL_M`` (1e-4 m; typically ~1e-6 m) above the root: a relative error of the
-derivative of about (PL - root) / s_j, below 1e-6 for sigmas of a metre.
+the solver's, bit for bit. The returned PL lies up to ``FAST_PROOF_TOL_M`` (1e-4 m;
+typically ~1e-6 m, ``PL_MARGIN_M``) above the root; the rule takes one Newton step from it to
+the root (error ~(PL - root)^2 D'/D) and evaluates the partial derivatives there, so that the
+derivative is that of the root (and of the returned PL, which is the root plus a margin that
+does not depend on the inputs wherever the solver's fast path settles it): without the step,
+its relative error is ~(PL - root) t_j / s_j, 1e-6 for sigmas of a metre.
 
 Where an element is not solved (ignored by the caller, not converged, a non-finite PL) its
 tangent is 0, and every coefficient of the rule is finite there, so a cotangent of 0 never
@@ -75,6 +78,12 @@ def _implicit_root_jvp(solve, primals, tangents):
     x = jnp.where(good, pl, 0.0)
     mean_s = jnp.where(good[None], mean, 0.0)
     sd_s = jnp.where(good[None], sd, 1.0)
+    # one Newton step from the returned PL (up to FAST_PROOF_TOL_M above the root) to the
+    # root itself (to ~(PL - root)^2), where the partial derivatives are taken
+    q, _, _, slope = risk_partials(x, coef, mean_s, sd_s)
+    excess = jnp.sum(jnp.broadcast_to(coef, mean.shape) * q, axis=0) - rhs
+    step_ok = good & (slope > 0)
+    x = jnp.where(step_ok, x + excess / jnp.where(step_ok, slope, 1.0), x)
     q, p_mean, p_sd, slope = risk_partials(x, coef, mean_s, sd_s)
     d_coef = jnp.broadcast_to(d_coef, mean.shape)
     num = jnp.sum(q * d_coef + p_mean * d_mean + p_sd * d_sd, axis=0) - d_rhs

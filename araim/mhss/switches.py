@@ -9,13 +9,13 @@ such gradients apart. Bits of the returned int8 (``SWITCH_*``):
 
 - ``SWITCH_UNMONITORED`` (1): P_NM within ``rtol`` (relative) of P_thresh: the status flips
   between OK and UNMONITORED_RISK (eq. 8), the PLs between finite and inf.
-- ``SWITCH_SINGULAR`` (2): a live mode (the all-in-view one included) whose weighted normal
-  matrix passes the pivot test at a tolerance ``band`` times looser and fails it at one
-  ``band`` times stricter than ``linalg.RELATIVE_PIVOT_TOLERANCE``: a mode near becoming
-  singular (its prior moves to P_NM, N_f and K_fa change). The oracle's "borderline" reading
-  (``reference_mhss.BORDERLINE_FACTOR``, 1e3) with the kernel's Cholesky test; the kernel tests
-  single-source modes by their redundancy instead (``SINGLE_REDUNDANCY_TOLERANCE``), which this
-  band brackets.
+- ``SWITCH_SINGULAR`` (2): a live mode (the all-in-view one included) whose clock-eliminated
+  position normal matrix passes the pivot test at a tolerance ``band`` times looser and fails
+  it at one ``band`` times stricter than ``linalg.RELATIVE_PIVOT_TOLERANCE``: a mode near
+  becoming singular (its prior moves to P_NM, N_f and K_fa change). The oracle's "borderline"
+  band (``reference_mhss.BORDERLINE_FACTOR``, 1e3) around the kernel's test of the
+  all-in-view and whole-constellation modes; the kernel's other tests (single-source
+  redundancy, generic pivots) differ from it by less than the band.
 - ``SWITCH_MODE_SET`` (4): the convention's selection of live modes or of the order changes
   when every P_s and P_const is scaled by 1 - ``rtol`` or 1 + ``rtol``.
 - ``SWITCH_EMT`` (8): two monitored modes of different thresholds set the EMT within ``rtol``
@@ -47,23 +47,28 @@ SINGULAR_BAND = 1e3
 
 
 def _near_singular(keep, live, g, w_int, member, band):
-    """(B,) bool: a live mode (keep (K, L, B)) passes the pivot test at tolerance / band and
-    fails it at tolerance x band (``linalg.cholesky`` on its (3 + C)-state normal matrix)."""
-    C = member.shape[1]
-    w = jnp.where(keep, w_int[None], 0.0)
-    cols = [g[None, :, a] for a in range(3)] + [member[None, :, c].astype(g.dtype)
-                                                for c in range(C)]
-    k = len(cols)
-    n = [[None] * k for _ in range(k)]
-    for i in range(k):
+    """(B,) bool: a live mode (keep (K, L, B)) whose position normal matrix after clock
+    elimination (rows centred on their constellation's weighted mean over the mode's kept
+    sources: the Schur complement, as the kernel's ``_whole_modes``) passes the pivot test
+    at tolerance / band and fails it at tolerance x band (``linalg.cholesky``, scale the sum
+    of the mode's weights as there). One test for every mode: the kernel's single-source
+    test (``SINGLE_REDUNDANCY_TOLERANCE`` on the redundancy) and its generic modes' pivot scale
+    (the largest diagonal entry) lie within the band of it."""
+    w = jnp.where(keep, w_int[None], 0.0)  # (K, L, B)
+    memf = member.astype(g.dtype)  # (L, C, B)
+    gt = [g[None, :, a] for a in range(3)]
+    for c in range(member.shape[1]):
+        wc = w * memf[None, :, c]
+        s_c = linalg.sum_axis(wc, 1)
+        inv = jnp.where(s_c > 0, 1.0 / jnp.where(s_c > 0, s_c, 1.0), 0.0)
+        for a in range(3):
+            mean = linalg.sum_axis(wc * g[None, :, a], 1) * inv  # (K, B)
+            gt[a] = gt[a] - memf[None, :, c] * mean[:, None]
+    n = [[None] * 3 for _ in range(3)]
+    for i in range(3):
         for j in range(i + 1):
-            n[i][j] = n[j][i] = linalg.sum_axis(w * cols[i] * cols[j], 1)
-    kept_c = jnp.any(keep[:, :, None, :] & member[None], axis=1)  # (K, C, B)
-    for c in range(C):  # a constellation with no kept source has no clock (as the kernel)
-        n[3 + c][3 + c] = n[3 + c][3 + c] + jnp.where(kept_c[:, c], 0.0, 1.0)
-    scale = n[0][0]
-    for j in range(1, k):
-        scale = jnp.maximum(scale, n[j][j])
+            n[i][j] = n[j][i] = linalg.sum_axis(w * gt[i] * gt[j], 1)
+    scale = linalg.sum_axis(w, 1)
     _, ok_loose = linalg.cholesky(n, scale=scale / band)
     _, ok_strict = linalg.cholesky(n, scale=scale * band)
     return jnp.any(live & ok_loose & ~ok_strict, axis=0)
