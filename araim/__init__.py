@@ -34,7 +34,13 @@ from oaraim.araim.fde import (
     separation_kernel,
     solution_separation,
 )
-from oaraim.araim.mhss import MHSSResult, Sources, protection_levels, protection_levels_kernel
+from oaraim.araim.mhss import (
+    MHSSResult,
+    Sources,
+    protection_levels,
+    protection_levels_kernel,
+    switch_flags_kernel,
+)
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slope_hpl_kernel, slopes, slopes_kernel
 from oaraim.araim.status import Status
@@ -60,6 +66,7 @@ __all__ = [
     "protection_levels_kernel",
     "separation_kernel",
     "solution_separation",
+    "switch_flags_kernel",
     "SlopeHPL",
     "Slopes",
     "Status",

@@ -51,6 +51,15 @@ def materialize(x):
     return x / (x == x).astype(x.dtype)
 
 
+def sqrt0(x):
+    """jnp.sqrt(x), bit for bit (NaN stays NaN), with derivative 0 where x <= 0: sqrt's
+    derivative is infinite at 0, and in reverse mode the zero cotangent of a masked or
+    identically zero entry (mode 0's solution separation, a padding source's spread) times
+    that infinity is a NaN that poisons the whole gradient (the "double where")."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), jax.lax.stop_gradient(jnp.sqrt(x)))
+
+
 def inverse_variance_weights(sigma_m, valid):
     """w = 1 / sigma^2 for valid sources and 0 for padding (whatever its sigma holds)."""
     return jnp.where(valid, 1.0 / jnp.where(valid, sigma_m, 1.0) ** 2, 0.0)

@@ -10,7 +10,10 @@ A small package, one concern per module:
 - ``root``: the PL equations and their root finder (eqs. 14-16, ``pls_from_projection``,
   ``solve_pl``);
 - ``entry``: the jit-safe kernel ``protection_levels_kernel`` and the host function
-  ``protection_levels`` over it.
+  ``protection_levels`` over it;
+- ``implicit``: the derivatives of the PL roots by the implicit function theorem
+  (``implicit_root``, a ``jax.custom_jvp`` on the root finder; docs/gradients.md);
+- ``switches``: where those derivatives are not defined (``switch_flags_kernel``).
 
 The names below are this package's public face; ``araim.fde`` builds the solution-separation
 test and exclusion on ``project`` and ``pls_from_projection``.
@@ -24,6 +27,7 @@ from oaraim.araim.mhss.entry import (
     protection_levels_kernel,
     protection_levels_threaded,
 )
+from oaraim.araim.mhss.implicit import implicit_root, risk_partials
 from oaraim.araim.mhss.inputs import (
     UNIT_ROW_TOLERANCE,
     Sources,
@@ -54,6 +58,15 @@ from oaraim.araim.mhss.root import (
     solve_pl,
     solve_pl_bracketed,
 )
+from oaraim.araim.mhss.switches import (
+    SINGULAR_BAND,
+    SWITCH_EMT,
+    SWITCH_MODE_SET,
+    SWITCH_RTOL,
+    SWITCH_SINGULAR,
+    SWITCH_UNMONITORED,
+    switch_flags_kernel,
+)
 
 __all__ = [
     "FAST_EXTRA_ROUNDS",
@@ -67,6 +80,12 @@ __all__ = [
     "Projection",
     "Q_INVERSE_APPROX_MARGIN",
     "SINGLE_REDUNDANCY_TOLERANCE",
+    "SINGULAR_BAND",
+    "SWITCH_EMT",
+    "SWITCH_MODE_SET",
+    "SWITCH_RTOL",
+    "SWITCH_SINGULAR",
+    "SWITCH_UNMONITORED",
     "Sources",
     "UNIT_ROW_TOLERANCE",
     "ZERO_SEPARATION_RTOL",
@@ -75,6 +94,7 @@ __all__ = [
     "check_options",
     "higher_order_flags",
     "host_inputs",
+    "implicit_root",
     "kernel_cache_size",
     "pls_from_projection",
     "prepare_inputs",
@@ -86,6 +106,8 @@ __all__ = [
     "q_inverse",
     "q_inverse_approx",
     "required_order",
+    "risk_partials",
     "solve_pl",
     "solve_pl_bracketed",
+    "switch_flags_kernel",
 ]

@@ -138,8 +138,12 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
         pl, status, emt, sigma_acc_u, adjusted = _optimized_position(
             pr, pl, status, emt, args, budget, iterations, position_optimization)
     ok = status == Status.OK
+    # the HPL of the finite PLs, inf where not OK: the same values, and no inf / inf = NaN in
+    # its derivative there (issue 27)
+    pl_ok = jnp.where(ok[None], pl[:2], 0.0)
+    hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
     out = MHSSResult(
-        hpl_m=jnp.sqrt(pl[0] ** 2 + pl[1] ** 2), vpl_m=pl[2], emt_m=emt,
+        hpl_m=hpl, vpl_m=pl[2], emt_m=emt,
         sigma_acc_u_m=jnp.where(ok, sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
         p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl,
         position_adjusted=adjusted)

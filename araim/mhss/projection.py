@@ -141,7 +141,7 @@ def _generic_modes(keep, w_int, cols, member, b_nom, var_acc, s0):
     for m in range(w.shape[1]):  # loops over sources: one fused (M, 3, B) loop each
         bias = bias + jnp.abs(s_pos[:, :, m]) * b_nom[m]
         ss2 = ss2 + (s_pos[:, :, m] - ref[:, :, m]) ** 2 * var_acc[m]
-    bias, sigma_ss = linalg.materialize(bias), linalg.materialize(jnp.sqrt(ss2))
+    bias, sigma_ss = linalg.materialize(bias), linalg.materialize(linalg.sqrt0(ss2))
     return s_pos, var_pos, bias, sigma_ss, nonsingular
 
 
@@ -204,8 +204,8 @@ def _whole_modes(keep, w_int, gt, b_nom, var_acc):
         bias = bias + jnp.abs(s_pos[:, :, m]) * b_nom[m]
         ss2 = ss2 + (s_pos[:, :, m] - s_pos[:1, :, m]) ** 2 * var_acc[m]
     var_pos = jnp.stack([inv[q][q] for q in range(3)], axis=1)
-    return (s_pos, var_pos, linalg.materialize(bias), linalg.materialize(jnp.sqrt(ss2)), ok,
-            inv)
+    return (s_pos, var_pos, linalg.materialize(bias), linalg.materialize(linalg.sqrt0(ss2)),
+            ok, inv)
 
 
 #: a single-source exclusion is singular when 1 - w_l h_l^T N0^-1 h_l (the share of source l's
@@ -257,7 +257,7 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     spread = w_int**2 * var_acc  # (L, B)
     for m in range(L):
         spread = spread + c[:, m] ** 2 * var_acc[m]
-    sigma_ss = jnp.abs(u_pos) * jnp.sqrt(spread)[:, None, :]
+    sigma_ss = jnp.abs(u_pos) * linalg.sqrt0(spread)[:, None, :]
     # (not stored before ``_blocks`` writes them into the mode arrays: note above it)
     return s_pos, var_pos, bias, sigma_ss, ok
 
@@ -343,7 +343,8 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
             var_pos = var_pos.at[0].set(var0)
             bias = bias.at[0].set(b0[0])
             nonsingular = nonsingular.at[0].set(ok0[0])
-            sigma_ss = jnp.sqrt(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None], axis=2))
+            sigma_ss = linalg.sqrt0(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None],
+                                              axis=2))
             sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
     pr = _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
                  budget, g.dtype, flags)
@@ -378,11 +379,11 @@ def adjusted_projection(pr, var_int, var_acc, b_nom, valid, budget, opt):
     ss2 = 0.0
     for m in range(valid.shape[0]):
         ss2 = ss2 + (pr.s_pos[:, :, m] - s_opt[None, :, m]) ** 2 * var_acc[m]
-    sigma_ss = jnp.where(pr.monitored[:, None], jnp.sqrt(ss2), 0.0)
+    sigma_ss = jnp.where(pr.monitored[:, None], linalg.sqrt0(ss2), 0.0)
     sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma0[None], 0.0, sigma_ss)
     k_fa = _k_fa(pr.n_modes, pr.monitored.shape[0], budget, var_acc.dtype)
     threshold = jnp.where(pr.monitored[:, None], k_fa[None] * sigma_ss, 0.0)
-    sigma_acc_u = jnp.sqrt(_sum(s_opt[2] ** 2 * var_acc, 0))
+    sigma_acc_u = linalg.sqrt0(_sum(s_opt[2] ** 2 * var_acc, 0))
     return pr._replace(s_pos=pr.s_pos.at[0].set(s_opt), sigma=pr.sigma.at[0].set(sigma0),
                        bias=pr.bias.at[0].set(bias0), sigma_ss=sigma_ss, threshold=threshold,
                        sigma_acc_u=sigma_acc_u)
@@ -422,8 +423,8 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
         jnp.where(~aiv_ok, Status.SINGULAR_GEOMETRY,
                   jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK)))
     status = linalg.materialize(jnp.where(invalid_input, Status.INVALID_INPUT, status))
-    sigma_acc_u = jnp.sqrt(jnp.sum(jnp.where(aiv_ok, s_pos_raw[0, 2], 0.0) ** 2 * var_acc,
-                                   axis=0))
+    sigma_acc_u = linalg.sqrt0(jnp.sum(jnp.where(aiv_ok, s_pos_raw[0, 2], 0.0) ** 2
+                                       * var_acc, axis=0))
     excluded = jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded], axis=0)
     return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[0].set(False),
                       prior, excluded, n_modes, p_nm, fm.order, status.astype(jnp.int8),

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 from jax.scipy.special import erfc, ndtri
 
 from oaraim.araim import linalg
+from oaraim.araim.mhss.implicit import implicit_root
 from oaraim.araim.status import Status
 
 __all__ = [
@@ -531,8 +532,11 @@ def pls_from_projection(pr, budget, iterations):
     start = jnp.stack([_max(jnp.where(kq > -jnp.inf, mean[:, q] + pr.sigma[:, q] * kq,
                                       -jnp.inf), 0) for q, kq in enumerate((k[0], k[0], k[1]))])
     rhs = jnp.stack([rhs_hv[0], rhs_hv[0], rhs_hv[1]], axis=0)  # (3, B)
-    pl, converged = solve_pl(coef, mean, pr.sigma, rhs, iterations, start,
-                             ignore=(pr.status != Status.OK)[None])
+    # differentiated by the implicit function theorem, not through the solver's loops
+    pl, converged = implicit_root(
+        lambda c, m, s, r, st, ig: solve_pl(c, m, s, r, iterations, st, ig),
+        coef, mean, pr.sigma, rhs, jax.lax.stop_gradient(start),
+        (pr.status != Status.OK)[None])
     status = jnp.where((pr.status == Status.OK) & ~jnp.all(converged, axis=0),
                        Status.NOT_CONVERGED, pr.status).astype(jnp.int8)
     ok = status == Status.OK
