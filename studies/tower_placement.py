@@ -6,8 +6,11 @@ receivers (``region_half_m``, ``grid_n``, ``receiver_h_m`` up) around seed 004's
 receiver; the GPS sky is the day's broadcast (or nominal) sky at ``sky_step_s`` (one sky for
 the whole region: 3 km move a satellite's direction by < 0.01 deg); the towers are SOPs of one
 operator (one SOP constellation) with Table I's budget and the study's sigma_URA^S and P_s^S.
-The objective is the 99.5 % HPL over receivers x epochs (the order statistic
-ceil(0.995 n); an HPL that cannot be computed counts as ``HPL_CAP_M``).
+``receivers`` may instead name a CSV of points (a drive's or a flight's path), and candidate
+sites a CSV too, in the ENU frame of that receiver or in latitude, longitude and height (a
+cell-tower database extract; ``read_points``). The objective is the 99.5 % HPL over receivers
+x epochs (the order statistic ceil(0.995 n); an HPL that cannot be computed counts as
+``HPL_CAP_M``), or with ``objective=availability`` the share of HPLs above ``hal_m``.
 
 Three answers, compared on that objective:
 
@@ -16,7 +19,8 @@ Three answers, compared on that objective:
 - **free placement by gradient descent**: projected Adam on the towers' east and north
   coordinates, from the ``starts`` best random placements, on a smooth surrogate, the
   log-sum-exp of the HPLs at temperature ``tau_m`` (``tau log mean exp(HPL / tau)``: a soft
-  maximum, smooth wherever the active mode sets do not switch);
+  maximum, smooth wherever the active mode sets do not switch), or for availability the mean
+  sigmoid((HPL - HAL) / tau);
 - **selection among candidate sites** (``candidates``: a CSV of east_m,north_m,up_m or 'auto',
   ``n_candidates`` sites drawn like a random placement): greedy (add the site that lowers the
   objective most) then 1-swap local search, both on the exact objective, against exhaustive
@@ -43,7 +47,9 @@ from oaraim.studies.base import (
     Study,
     count,
     in_range,
+    keyword_or_file,
     non_negative,
+    parse_choice,
     positive,
     probability,
 )
@@ -62,33 +68,44 @@ MAP_N = 15
 ADAM_B1, ADAM_B2 = 0.9, 0.999
 
 
-def parse_candidates(name, v):
-    """'auto' or an existing CSV file of east_m,north_m,up_m rows (a header line allowed)."""
-    v = str(v).strip()
-    if v == "auto":
-        return v
-    p = Path(v).expanduser()
-    if not p.is_file():
-        raise ValueError(f"{name} must be 'auto' or an existing CSV file of east_m,north_m,up_m "
-                         f"rows, got {v!r}")
-    return str(p)
+_POINTS_CSV = "CSV file of east_m,north_m,up_m or lat_deg,lon_deg,height_m rows"
+#: parser of ``candidates``: 'auto' or a CSV file of points (``read_points``)
+parse_candidates = keyword_or_file(("auto",), _POINTS_CSV)
+#: parser of ``receivers``: 'grid' or a CSV file of points (e.g. a drive's or flight's path)
+parse_receivers = keyword_or_file(("grid",), _POINTS_CSV)
 
 
-def read_candidates(path):
-    """(K, 3) east, north, up (m) from a CSV file; the message names the file and the line."""
+def read_points(path, origin_ecef_m=c.ORANGE_COUNTY_ECEF_M, at_least=1):
+    """(K, 3) east, north, up (m) about ``origin_ecef_m`` from a CSV file: rows of
+    east_m,north_m,up_m, or, under a header whose first column names a latitude (``lat``...),
+    rows of lat_deg,lon_deg,height_m (WGS-84 ellipsoidal height; e.g. a cell-tower database
+    extract), converted to the origin's ENU frame. Messages name the file and the line."""
+    text = Path(path).read_text().splitlines()
+    geodetic = bool(text) and text[0].split(",")[0].strip().lower().startswith("lat")
+    want = "lat_deg,lon_deg,height_m" if geodetic else "east_m,north_m,up_m"
     rows = []
-    for i, line in enumerate(Path(path).read_text().splitlines(), 1):
+    for i, line in enumerate(text, 1):
         parts = [s.strip() for s in line.split(",")]
         if not line.strip() or (i == 1 and not _is_number(parts[0])):
             continue
         try:
-            e, n, u = (float(x) for x in parts[:3])
+            a, b, h = (float(x) for x in parts[:3])
         except ValueError:
-            raise ValueError(f"{path}:{i}: expected east_m,north_m,up_m, got {line!r}") from None
-        rows.append((e, n, u))
-    if len(rows) < 2:
-        raise ValueError(f"{path}: needs at least 2 candidate rows, found {len(rows)}")
-    return np.array(rows)
+            raise ValueError(f"{path}:{i}: expected {want}, got {line!r}") from None
+        rows.append((a, b, h))
+    if len(rows) < at_least:
+        raise ValueError(f"{path}: needs at least {at_least} rows of {want}, found {len(rows)}")
+    pts = np.array(rows, float)
+    if geodetic:
+        ecef = np.asarray(geometry.geodetic_to_ecef(np.deg2rad(pts[:, 0]),
+                                                    np.deg2rad(pts[:, 1]), pts[:, 2]))
+        pts = np.asarray(geometry.ecef_to_enu(ecef, np.asarray(origin_ecef_m)))
+    return pts
+
+
+def read_candidates(path):
+    """Candidate sites (K >= 2, 3) ENU from a CSV file (``read_points``)."""
+    return read_points(path, at_least=2)
 
 
 def _is_number(s):
@@ -144,6 +161,22 @@ def quantile_hpl(hpl, q=QUANTILE):
     return h[..., min(max(k, 0), h.shape[-1] - 1)]
 
 
+def unavailability_pct(hpl, hal_m):
+    """The availability objective: % of HPLs above ``hal_m`` (or not computable) along the last
+    axis (lower is better)."""
+    return 100.0 * np.mean(~(np.asarray(hpl) <= hal_m), axis=-1)
+
+
+def soft_unavailability_pct(hpl, hal_m, tau_m):
+    """Its surrogate: 100 mean sigmoid((HPL - HAL) / tau) (inf as HPL_CAP_M)."""
+    h = jnp.where(jnp.isfinite(hpl), hpl, HPL_CAP_M)
+    return 100.0 * jnp.mean(jax.nn.sigmoid((h - hal_m) / tau_m), axis=-1)
+
+
+#: ``objective``: what the placement minimises
+OBJECTIVES = ("hpl", "availability")
+
+
 def soft_max_hpl(hpl, tau_m):
     """The surrogate: tau log mean exp(HPL / tau) along the last axis (inf as HPL_CAP_M; no
     derivative flows through a capped element)."""
@@ -157,17 +190,33 @@ class Problem:
     def __init__(self, params, sky):
         self.sky = {k: jnp.asarray(sky[k]) for k in ("az_rad", "el_rad", "valid")}
         self.sop = (params["sigma_ura_sop_m"], params["p_s_sop"], params["p_const_sop"])
-        self.receivers = receiver_grid(params["region_half_m"], params["grid_n"],
-                                       params["receiver_h_m"])
+        if params["receivers"] == "grid":
+            self.receivers = receiver_grid(params["region_half_m"], params["grid_n"],
+                                           params["receiver_h_m"])
+        else:
+            self.receivers = read_points(params["receivers"])
         self.tau = params["tau_m"]
+        self.hal = params["hal_m"]
+        self.kind = params["objective"]
+        #: what the objective is, for the summary rows and figures, and its unit
+        self.label, self.unit = (("99.5 % HPL", "m") if self.kind == "hpl" else
+                                 (f"unavailability at HAL {self.hal:g} m", "%"))
         self.evaluations = 0
         self._eval = jax.jit(functools.partial(region_hpls, sky=self.sky, sop=self.sop))
         self._grad = jax.jit(jax.value_and_grad(self._surrogate))
 
     def _surrogate(self, towers, valid):
         r = jnp.asarray(self.receivers)[None]
-        return soft_max_hpl(region_hpls(towers[None], valid[None], r, self.sky, self.sop),
-                            self.tau)[0]
+        h = region_hpls(towers[None], valid[None], r, self.sky, self.sop)
+        if self.kind == "hpl":
+            return soft_max_hpl(h, self.tau)[0]
+        return soft_unavailability_pct(h, self.hal, self.tau)[0]
+
+    def score(self, hpl):
+        """The exact objective of HPLs (..., R * E): the 99.5 % HPL or the unavailability."""
+        if self.kind == "hpl":
+            return quantile_hpl(hpl)
+        return unavailability_pct(hpl, self.hal)
 
     def hpls(self, towers, valid, receivers=None):
         """HPLs (P, R * E) of P placements (P, T, 3) in calls of ``EVAL_BATCH`` placements."""
@@ -186,10 +235,11 @@ class Problem:
         return np.concatenate(out, 0)
 
     def objective(self, towers, valid=None):
-        """99.5 % HPL of each placement (P, T, 3) (all towers valid unless ``valid``)."""
+        """The exact objective (``score``) of each placement (P, T, 3) (all towers valid
+        unless ``valid``)."""
         towers = np.asarray(towers, float)
         valid = np.ones(towers.shape[:2], bool) if valid is None else valid
-        return quantile_hpl(self.hpls(towers, valid))
+        return self.score(self.hpls(towers, valid))
 
     def value_and_grad(self, towers):
         """Surrogate and its gradient with respect to one placement's towers (T, 3)."""
@@ -251,7 +301,7 @@ def greedy_swap(problem, sites, n_select):
             idx = [*chosen, j]
             towers[i, :len(idx)] = sites[idx]
             valid[i, :len(idx)] = True
-        q = quantile_hpl(problem.hpls(towers, valid))
+        q = problem.score(problem.hpls(towers, valid))
         chosen.append(rest[int(np.argmin(q))])
     best = float(problem.objective(sites[chosen][None])[0])
     history = [best]
@@ -308,6 +358,8 @@ class TowerPlacement(Study):
         "region_half_m": Param(1500.0, positive, "half-width of the receivers' square", "m"),
         "grid_n": Param(5, count(1, 41), "receivers per side of the square"),
         "receiver_h_m": Param(0.0, in_range(-100.0, 10000.0), "receiver height (ENU up)", "m"),
+        "receivers": Param("grid", parse_receivers, "'grid' (the square above) or a CSV of "
+                           "points (e.g. a drive's or flight's path), ENU or lat/lon"),
         "n_towers": Param(3, count(1, 12), "free towers (random and gradient placement)"),
         "tower_h_m": Param(30.0, in_range(-100.0, 1000.0), "tower height (ENU up)", "m"),
         "box_half_m": Param(3000.0, positive, "towers stay within this half-width", "m"),
@@ -315,12 +367,17 @@ class TowerPlacement(Study):
                                  "m"),
         "p_s_sop": Param(1e-5, probability, "SOP P_s (seed 004 finding (i): <= 1e-5)"),
         "p_const_sop": Param(c.P_CONST_SOP, probability, "SOP constellation fault (Table I)"),
-        "tau_m": Param(1.0, positive, "temperature of the log-sum-exp surrogate", "m"),
+        "objective": Param("hpl", parse_choice(*OBJECTIVES), "minimise the 99.5 % HPL ('hpl') or "
+                           "the share of HPLs above hal_m ('availability')"),
+        "hal_m": Param(40.0, positive, "horizontal alert limit of objective=availability", "m"),
+        "tau_m": Param(1.0, positive, "temperature of the surrogate (log-sum-exp; sigmoid "
+                       "width for availability)", "m"),
         "iterations": Param(40, count(1, 10000), "gradient steps per start"),
         "starts": Param(3, count(1, 64), "starts: the best random placements"),
         "step_m": Param(150.0, positive, "first Adam step (decays to a tenth)", "m"),
         "candidates": Param("auto", parse_candidates, "candidate sites: 'auto' (random, like a "
-                            "placement) or a CSV of east_m,north_m,up_m"),
+                            "placement) or a CSV of east_m,north_m,up_m or lat_deg,lon_deg,"
+                            "height_m (e.g. a cell-tower database extract)"),
         "n_candidates": Param(10, count(2, 200), "'auto' candidate sites"),
         "n_select": Param(3, count(1, 12), "sites to select"),
         "exhaustive_limit": Param(5000, count(1), "largest subset count searched exhaustively"),
@@ -372,7 +429,7 @@ class TowerPlacement(Study):
                                                    [len(q_rand) // 2]],
                                               np.ones(n_t, bool), box),
                 "optimised": prob.hpl_map(free[0], np.ones(n_t, bool), box)}
-        q_gps = float(quantile_hpl(prob.hpls(none[0][None], none[1][None]))[0])
+        q_gps = float(prob.score(prob.hpls(none[0][None], none[1][None]))[0])
         return finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
                       swaps, exh, refined, maps, q_gps)
 

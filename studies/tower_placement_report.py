@@ -15,10 +15,10 @@ def finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
     i_med = np.argsort(q_rand, kind="stable")[len(q_rand) // 2]  # the upper median placement
     q_med = float(q_rand[i_med])
     ds = xr.Dataset(
-        {"random_objective_m": ("placement", q_rand),
+        {"random_objective": ("placement", q_rand),
          "random_towers_enu_m": (("placement", "tower", "enu"), rand),
-         "descent_surrogate_m": (("start", "iteration"), np.stack([r[2] for r in runs])),
-         "descent_objective_m": (("start", "iteration"), np.stack([r[3] for r in runs])),
+         "descent_surrogate": (("start", "iteration"), np.stack([r[2] for r in runs])),
+         "descent_objective": (("start", "iteration"), np.stack([r[3] for r in runs])),
          "optimised_towers_enu_m": (("tower", "enu"), free[0]),
          "random_median_towers_enu_m": (("tower", "enu"), rand[i_med]),
          "candidate_sites_enu_m": (("site", "enu"), sites),
@@ -32,50 +32,58 @@ def finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
                 "map_east": np.linspace(-box, box, maps["gps_only"].shape[1]),
                 "map_north": np.linspace(-box, box, maps["gps_only"].shape[0])},
         attrs={"sky_source": sky["description"], "box_half_m": box,
-               "objective": "99.5 % HPL over receivers x epochs",
-               "q_gps_only_m": q_gps, "q_random_median_m": q_med,
-               "q_random_best_m": float(np.min(q_rand)), "q_optimised_m": free[1],
-               "q_greedy_m": q_greedy, "q_exhaustive_m": exh[1] if exh else np.nan,
-               "q_refined_m": refined[1]})
-    gap = (q_greedy / exh[1] - 1.0) if exh else float("nan")
+               "objective": f"{prob.label} over receivers x epochs", "unit": prob.unit,
+               "objective_gps_only": q_gps, "objective_random_median": q_med,
+               "objective_random_best": float(np.min(q_rand)), "objective_optimised": free[1],
+               "objective_greedy": q_greedy, "objective_exhaustive": exh[1] if exh else np.nan,
+               "objective_refined": refined[1]})
+    if not exh:
+        gap = float("nan")
+    elif prob.kind == "hpl":  # relative, in %
+        gap = 100.0 * (q_greedy / exh[1] - 1.0)
+    else:  # an unavailability is already a share: the difference, in percentage points
+        gap = q_greedy - exh[1]
     n_sub = len(exh[2]) if exh else 0
     setting = (f"{params['grid_n']}^2 receivers in +-{params['region_half_m']:g} m x "
                f"{sky['az_rad'].shape[0]} epochs; sigma_URA^S {params['sigma_ura_sop_m']:g} m, "
                f"P_s^S {params['p_s_sop']:g}; {sky['description']}")
+    lab, unit = prob.label, prob.unit
     rows = [
-        {"quantity": "99.5 % HPL, GPS only", "unit": "m", "published": None,
+        {"quantity": f"{lab}, GPS only", "unit": unit, "published": None,
          "reproduced": q_gps, "note": setting},
-        {"quantity": f"99.5 % HPL, {params['n_towers']} random towers (median of "
-                     f"{len(q_rand)} placements)", "unit": "m", "published": None,
+        {"quantity": f"{lab}, {params['n_towers']} random towers (median of "
+                     f"{len(q_rand)} placements)", "unit": unit, "published": None,
          "reproduced": q_med,
          "note": f"towers uniform in +-{box:g} m at {params['tower_h_m']:g} m"},
-        {"quantity": "99.5 % HPL, best random placement", "unit": "m", "published": None,
+        {"quantity": f"{lab}, best random placement", "unit": unit, "published": None,
          "reproduced": float(np.min(q_rand)), "note": ""},
-        {"quantity": "99.5 % HPL, gradient-optimised placement", "unit": "m",
+        {"quantity": f"{lab}, gradient-optimised placement", "unit": unit,
          "published": None, "reproduced": free[1],
-         "note": f"projected Adam on the log-sum-exp surrogate (tau {params['tau_m']:g} m), "
+         "note": f"projected Adam on the smooth surrogate (tau {params['tau_m']:g} m), "
                  f"{params['starts']} starts x {n_it} steps from the best random placements"},
-        {"quantity": f"99.5 % HPL, best {params['n_select']} of {len(sites)} sites "
-                     "(exhaustive search)", "unit": "m", "published": None,
+        {"quantity": f"{lab}, best {params['n_select']} of {len(sites)} sites "
+                     "(exhaustive search)", "unit": unit, "published": None,
          "reproduced": exh[1] if exh else float("nan"),
          "note": f"{n_sub} subsets" if exh else "more subsets than exhaustive_limit"},
-        {"quantity": "99.5 % HPL, greedy + swap selection", "unit": "m", "published": None,
+        {"quantity": f"{lab}, greedy + swap selection", "unit": unit, "published": None,
          "reproduced": q_greedy, "note": f"{len(swaps) - 1} improving swaps"},
-        {"quantity": "greedy + swap above the exhaustive best", "unit": "%",
-         "published": None, "reproduced": 100.0 * gap,
+        {"quantity": "greedy + swap above the exhaustive best",
+         "unit": "%" if prob.kind == "hpl" else "percentage points",
+         "published": None, "reproduced": gap,
          "note": "issue 27: within 1 % on the small cases"},
-        {"quantity": f"99.5 % HPL, selection refined by gradient (towers within "
-                     f"{params['refine_radius_m']:g} m of their sites)", "unit": "m",
+        {"quantity": f"{lab}, selection refined by gradient (towers within "
+                     f"{params['refine_radius_m']:g} m of their sites)", "unit": unit,
          "published": None, "reproduced": refined[1], "note": ""},
     ]
-    metrics = {"objective": "99.5 % HPL over receivers x epochs (inf counted as 1000 m)",
+    metrics = {"objective": f"{lab} over receivers x epochs (an HPL that cannot be computed "
+                            "counts as 1000 m)",
                "evaluations": int(prob.evaluations), "epochs": int(sky["az_rad"].shape[0]),
                "receivers": int(prob.receivers.shape[0]), "sky_source": sky["description"],
                "greedy_sites": [int(i) for i in greedy],
                "exhaustive_sites": [int(i) for i in exh[0]] if exh else None,
                "optimised_towers_enu_m": np.round(free[0], 2).tolist(),
                "improvement_over_random_median_pct":
-                   100.0 * (1.0 - free[1] / q_med)}
+                   100.0 * (1.0 - free[1] / q_med) if q_med > 0 else float("nan")}
     return StudyResult(ds, rows, metrics)
 
 
@@ -102,7 +110,8 @@ def plot(ds, out_dir):
         if towers is not None:
             ax.plot(towers[:, 0] / 1e3, towers[:, 1] / 1e3, "r^", ms=9, label="towers")
             ax.legend(fontsize=8, loc="lower right")
-        ax.set_title(f"{title}\n99.5 % HPL over the receivers (dots): {a[f'q_{k}_m']:.2f} m",
+        q = a[f"objective_{k}"]
+        ax.set_title(f"{title}\n{a['objective']} (dots): {q:.2f} {a['unit']}",
                      fontsize=9)
         ax.set_xlabel("east (km)")
         ax.set_xlim(-box / 1e3, box / 1e3)
@@ -110,18 +119,18 @@ def plot(ds, out_dir):
     axes[0].set_ylabel("north (km)")
     fig.colorbar(im, ax=axes, label="99.5 % HPL over the day at each point (m)", shrink=0.85)
     p = f"{out_dir}/tower_placement_maps.png"
-    fig.savefig(p, dpi=110)
+    fig.savefig(p, dpi=110, bbox_inches="tight")
     plt.close(fig)
     paths.append(p)
 
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11.0, 4.0))
     for i in range(ds.sizes["start"]):
-        ax.plot(ds["descent_objective_m"].values[i], "-", label=f"start {i + 1}: 99.5 % HPL")
-        ax.plot(ds["descent_surrogate_m"].values[i], ":", color=ax.lines[-1].get_color(),
+        ax.plot(ds["descent_objective"].values[i], "-", label=f"start {i + 1}: objective")
+        ax.plot(ds["descent_surrogate"].values[i], ":", color=ax.lines[-1].get_color(),
                 label=f"start {i + 1}: surrogate")
-    ax.axhline(a["q_random_median_m"], color="gray", ls="--", lw=0.8, label="random median")
+    ax.axhline(a["objective_random_median"], color="gray", ls="--", lw=0.8, label="random median")
     ax.set_xlabel("gradient step")
-    ax.set_ylabel("m")
+    ax.set_ylabel(f"objective and surrogate ({a['unit']})")
     ax.set_title("free placement: convergence", fontsize=9)
     ax.legend(fontsize=7)
     sites = ds["candidate_sites_enu_m"].values / 1e3
@@ -129,10 +138,12 @@ def plot(ds, out_dir):
     g = ds["greedy_selected"].values
     e = ds["exhaustive_selected"].values
     bx.plot(sites[e, 0], sites[e, 1], "bs", ms=11, mfc="none",
-            label=f"exhaustive best: {a['q_exhaustive_m']:.2f} m")
-    bx.plot(sites[g, 0], sites[g, 1], "r^", ms=7, label=f"greedy + swap: {a['q_greedy_m']:.2f} m")
+            label=f"exhaustive best: {a['objective_exhaustive']:.2f} {a['unit']}")
+    bx.plot(sites[g, 0], sites[g, 1], "r^", ms=7,
+            label=f"greedy + swap: {a['objective_greedy']:.2f} {a['unit']}")
     ref = ds["refined_towers_enu_m"].values / 1e3
-    bx.plot(ref[:, 0], ref[:, 1], "g*", ms=9, label=f"refined: {a['q_refined_m']:.2f} m")
+    bx.plot(ref[:, 0], ref[:, 1], "g*", ms=9,
+            label=f"refined: {a['objective_refined']:.2f} {a['unit']}")
     bx.plot(rx[:, 0] / 1e3, rx[:, 1] / 1e3, ".", color="gray", ms=3)
     bx.set_xlim(-box / 1e3, box / 1e3)
     bx.set_ylim(-box / 1e3, box / 1e3)

@@ -109,5 +109,36 @@ def test_candidates_csv(tmp_path):
         tp.read_candidates(str(f))
     with pytest.raises(ValueError, match="candidates must be 'auto' or an existing CSV"):
         STUDY.validate({"candidates": str(tmp_path / "none.csv")})
+    with pytest.raises(ValueError, match="receivers must be 'grid' or an existing CSV"):
+        STUDY.validate({"receivers": str(tmp_path / "none.csv")})
+    with pytest.raises(ValueError, match="objective must be one of hpl, availability"):
+        STUDY.validate({"objective": "vpl"})
+        STUDY.validate({"candidates": str(tmp_path / "none.csv")})
     with pytest.raises(ValueError, match=r"n_select \(5\) must not exceed n_candidates \(4\)"):
         STUDY.validate({"n_select": "5", "n_candidates": "4"})
+
+
+def test_geodetic_candidates_become_enu(tmp_path):
+    """A cell-tower extract in latitude, longitude, ellipsoidal height: the origin itself maps
+    to (0, 0, 0); a point 0.01 deg of latitude north and 30 m higher lies 1,109-1,110 m
+    north (one hundredth of a degree of latitude at 34 deg: 1109.3 m on WGS-84) and 30 m up."""
+    from oaraim import geometry
+
+    lat_rad, lon_rad, h = geometry.ecef_to_geodetic(np.asarray(c.ORANGE_COUNTY_ECEF_M))
+    lat, lon, h = float(np.degrees(lat_rad)), float(np.degrees(lon_rad)), float(h)
+    f = tmp_path / "towers.csv"
+    f.write_text(f"lat_deg,lon_deg,height_m\n{lat:.10f},{lon:.10f},{h:.4f}\n"
+                 f"{lat + 0.01:.10f},{lon:.10f},{h + 30:.4f}\n")
+    pts = tp.read_candidates(str(f))
+    np.testing.assert_allclose(pts[0], 0.0, atol=1e-3)
+    assert pts[1][1] == pytest.approx(1109.3, abs=1.0)
+    assert abs(pts[1][0]) < 1e-3 and pts[1][2] == pytest.approx(30.0, abs=0.2)
+
+
+def test_availability_objective_by_hand():
+    """Unavailability counts HPLs above the HAL and the ones that cannot be computed; its
+    surrogate is the mean sigmoid, 50 % at HPL = HAL."""
+    h = np.array([10.0, 39.0, 41.0, np.inf])
+    assert tp.unavailability_pct(h, 40.0) == 50.0
+    assert float(tp.soft_unavailability_pct(jnp.array([40.0]), 40.0, 1.0)) == 50.0
+    assert float(tp.soft_unavailability_pct(jnp.asarray(h), 40.0, 0.01)) == pytest.approx(50.0)
