@@ -61,6 +61,8 @@ DEFAULT_DAY = (2018, 6, 19)
 PUBLISHED_MEAN_GPS_M = 19.45
 PUBLISHED_MEAN_SOP_M = 11.60
 PUBLISHED_EPISODES = 4
+#: seed 001 Fig. 5(b): "an instance of having HPL > 80 m in the GPS-only framework"
+PUBLISHED_INSTANCE_HPL_M = 80.0
 #: static GPS slot count after compaction: visible GPS above 15 deg never exceed 12 at mid
 #: latitudes (DESIGN.md); padding rows are masked and never change an HPL
 GPS_SLOTS = (8, 12, 16, 24, 32)
@@ -286,12 +288,33 @@ class Fig5Madrid24h(Study):
                 target = int(round(n_draws * (start + n) / n_t))
                 progress.advance(target - advanced)
                 advanced = target
+        inst = self.instance(params, hpl_gps, az, el, valid, seed_key)
         return self._result(params, t, hpl_gps, sop_mean, sop_p05, sop_p95, sop_share, n_vis,
-                            sky_desc, real, n_draws)
+                            sky_desc, real, n_draws, inst)
+
+    @staticmethod
+    def instance(params, hpl_gps, az, el, valid, seed_key):
+        """Fig. 5(b)-(c): the epoch of the day's largest finite GPS-only HPL, its GPS sky and
+        its first tower draw (the draw of key (seed, epoch, 0) the HPLs used), as dataset
+        variables on the dims ``instance_slot`` and ``instance_tower``."""
+        fin = np.isfinite(hpl_gps)
+        e = int(np.argmax(np.where(fin, hpl_gps, -np.inf))) if fin.any() else 0
+        key = jax.random.fold_in(jax.random.fold_in(seed_key, e), 0)
+        tw = geometry.bpp_towers(key, params["n_sops"], params["d_min_m"], params["d_max_m"],
+                                 params["h_min_m"], params["h_max_m"])
+        return {"instance_gps_az_rad": ("instance_slot", az[e]),
+                "instance_gps_el_rad": ("instance_slot", el[e]),
+                "instance_gps_valid": ("instance_slot", valid[e]),
+                "instance_tower_enu_m": (("instance_tower", "enu"), np.asarray(tw.enu_m)),
+                "instance_tower_az_rad": ("instance_tower", np.asarray(tw.az_rad)),
+                "instance_tower_el_rad": ("instance_tower", np.asarray(tw.el_rad)),
+                "instance_epoch": ((), e)}
 
     def _result(self, params, t, hpl_gps, sop_mean, sop_p05, sop_p95, sop_share, n_vis,
-                sky_desc, real, n_draws):
+                sky_desc, real, n_draws, inst):
         both = np.isfinite(hpl_gps) & np.isfinite(sop_mean)
+        e_inst = int(inst["instance_epoch"][1])
+        inst_hpl = float(hpl_gps[e_inst])
         mean_gps = float(np.mean(hpl_gps[both])) if both.any() else float("inf")
         mean_sop = float(np.mean(sop_mean[both])) if both.any() else float("inf")
         thr, step = params["hpl_threshold_m"], params["step_s"]
@@ -306,8 +329,8 @@ class Fig5Madrid24h(Study):
             {"hpl_gps_m": ("epoch", hpl_gps), "hpl_sop_mean_m": ("epoch", sop_mean),
              "hpl_sop_p05_m": ("epoch", sop_p05), "hpl_sop_p95_m": ("epoch", sop_p95),
              "sop_finite_share": ("epoch", sop_share), "n_gps_visible": ("epoch", n_vis),
-             "t_gps_s": ("epoch", t), "hours": ("epoch", hours)},
-            coords={"epoch": np.arange(t.size)},
+             "t_gps_s": ("epoch", t), "hours": ("epoch", hours), **inst},
+            coords={"epoch": np.arange(t.size), "enu": ["east", "north", "up"]},
             attrs={"sky_source": sky_desc, "real_ephemeris": int(real),
                    "hpl_threshold_m": thr, "mean_hpl_gps_m": mean_gps,
                    "mean_hpl_sop_m": mean_sop, "draws_per_epoch": n_draws,
@@ -335,6 +358,11 @@ class Fig5Madrid24h(Study):
              "published": PUBLISHED_EPISODES, "reproduced": len(eps_k),
              "note": "durations (min): " + (", ".join(f"{d:.1f}" for _, _, d in eps_k)
                                             or "none")},
+            {"quantity": "Fig. 5(b): largest finite GPS-only HPL of the day (an instance > 80 m)",
+             "unit": "m", "published": PUBLISHED_INSTANCE_HPL_M, "reproduced": inst_hpl,
+             "note": f"published: > {PUBLISHED_INSTANCE_HPL_M:g} m; epoch {e_inst} ("
+                     f"{hours[e_inst]:.2f} h), {int(n_vis[e_inst])} GPS in view, GPS + SOPs "
+                     f"{sop_mean[e_inst]:.1f} m (mean of the draws)"},
         ]
         metrics = {
             "sky_source": sky_desc, "real_ephemeris": bool(real), "epochs": int(t.size),
@@ -356,7 +384,8 @@ class Fig5Madrid24h(Study):
 
     def plot(self, out_dir):
         """fig5_hpl_24h.png: both HPLs over the day (the 5-95 % band of the tower draws) and
-        the GPS satellites in view."""
+        the GPS satellites in view; fig5b_instance_sky.png and fig5c_instance_enu.png: the
+        epoch of the largest GPS-only HPL (``plot_instance``)."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
@@ -393,4 +422,54 @@ class Fig5Madrid24h(Study):
         path = f"{out_dir}/fig5_hpl_24h.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)
-        return [path]
+        return [path, *plot_instance(ds, out_dir)]
+
+
+def plot_instance(ds, out_dir):
+    """Seed 001 Fig. 5(b): the sky of the instance (GPS satellites and the SOP towers of its
+    first draw, on the horizon ring at 0 deg) and (c): the same in ENU about the receiver
+    (towers at their positions, satellites as directions). Returns the two paths."""
+    import matplotlib.pyplot as plt
+
+    e = int(ds["instance_epoch"].values)
+    v = ds["instance_gps_valid"].values.astype(bool)
+    az, el = ds["instance_gps_az_rad"].values[v], ds["instance_gps_el_rad"].values[v]
+    taz, tel = ds["instance_tower_az_rad"].values, ds["instance_tower_el_rad"].values
+    enu = ds["instance_tower_enu_m"].values
+    hg, hs = float(ds["hpl_gps_m"].values[e]), float(ds["hpl_sop_mean_m"].values[e])
+    when = f"{float(ds['hours'].values[e]):.2f} h"
+    fig = plt.figure(figsize=(5.2, 5.2))
+    ax = fig.add_subplot(projection="polar")
+    ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)
+    ax.plot(az, 90 - np.degrees(el), "o", color="tab:blue", ms=9, label=f"GPS ({v.sum()})")
+    ax.plot(taz, 90 - np.degrees(tel), "^", color="tab:red", ms=9,
+            label=f"SOP towers ({taz.size}, one draw)")
+    ax.set_rlim(0, 90)
+    ax.set_rticks([0, 30, 60, 90], labels=["90", "60", "30", "0 deg"])
+    ax.legend(loc="lower left", fontsize=7, bbox_to_anchor=(-0.1, -0.12))
+    ax.set_title(f"Seed 001 Fig. 5(b): epoch {e} ({when}), HPL GPS only {hg:.1f} m, "
+                 f"GPS + SOPs {hs:.1f} m", fontsize=8)
+    p_b = f"{out_dir}/fig5b_instance_sky.png"
+    fig.savefig(p_b, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+    fig = plt.figure(figsize=(6.0, 5.4))
+    ax = fig.add_subplot(projection="3d")
+    r = float(np.max(np.abs(enu[:, :2]))) if enu.size else 1000.0
+    for a, b in zip(az, el, strict=True):
+        d = r * np.array([np.cos(b) * np.sin(a), np.cos(b) * np.cos(a), np.sin(b)])
+        ax.plot([0, d[0]], [0, d[1]], [0, d[2]], color="tab:blue", lw=1)
+        ax.plot([d[0]], [d[1]], [d[2]], "o", color="tab:blue", ms=6)
+    ax.plot(enu[:, 0], enu[:, 1], enu[:, 2], "^", color="tab:red", ms=8, label="SOP towers")
+    ax.plot([0], [0], [0], "ks", ms=6, label="receiver")
+    ax.plot([], [], "o-", color="tab:blue", label="GPS directions")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_zlabel("up (m)")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("Seed 001 Fig. 5(c): the same instance in ENU about the receiver", fontsize=8)
+    p_c = f"{out_dir}/fig5c_instance_enu.png"
+    fig.savefig(p_c, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return [p_b, p_c]

@@ -1,6 +1,7 @@
 """Seed 001 Fig. 5 study: kernel against the NumPy oracle, chunk invariance, sky fallback."""
 
 import json
+from pathlib import Path
 import warnings
 
 import jax
@@ -119,6 +120,21 @@ def test_explicit_nominal_sky(tmp_path, monkeypatch):
     assert all(set(r) >= {"quantity", "unit", "published", "reproduced", "note"}
                for r in summary["rows"])
     assert figures and (sdir / "fig5_hpl_24h.png").is_file()
+    # Fig. 5(b)-(c): the epoch of the largest finite GPS-only HPL, its sky and one tower draw
+    assert {"fig5b_instance_sky.png", "fig5c_instance_enu.png"} <= {p.name for p in
+                                                                     map(Path, figures)}
+    import xarray as xr
+
+    ds = xr.open_zarr(sdir / "data.zarr", consolidated=False).load()
+    h = ds["hpl_gps_m"].values
+    e = int(ds["instance_epoch"].values)
+    assert h[e] == np.max(h[np.isfinite(h)])
+    row = next(r for r in summary["rows"] if r["quantity"].startswith("Fig. 5(b)"))
+    assert row["reproduced"] == h[e] and row["published"] == 80.0
+    enu, az = ds["instance_tower_enu_m"].values, ds["instance_tower_az_rad"].values
+    assert enu.shape == (5, 3)
+    np.testing.assert_allclose(np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), az % (2 * np.pi),
+                               atol=1e-9)
 
 
 def test_real_file_small_run(shared_data, tmp_path):
