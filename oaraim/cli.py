@@ -290,6 +290,13 @@ def bench(
               f"{p['fault_modes_s'] / p['total_s']:.0%}, projectors (eqs. 9-12) "
               f"{p['projectors_s'] / p['total_s']:.0%}, PL root finding "
               f"{p['pl_root_finding_s'] / p['total_s']:.0%}", highlight=False)
+    from oaraim.bench_grad import bench_gradient
+
+    res["mhss_gradient"] = gr = bench_gradient(batch=4_096 if quick else 16_384)
+    out.print(f"  value and gradient of HPL (all {len(gr['inputs'])} real inputs, one thread, "
+              f"batch {gr['batch']:,}): {gr['value_and_grad_hpl_per_s']:,.0f} HPL/s against "
+              f"{gr['value_hpl_per_s']:,.0f} HPL/s for the value alone: "
+              f"{gr['ratio']:.1f}x its cost (goal <= 3x)", highlight=False)
     n3 = 100_000 if quick else 1_000_000
     res["fig3"] = b.bench_fig3(n3)
     out.print(f"seed001-fig3-elevation at {n3:,} realizations: {res['fig3']['wall_s']:.1f} s "
