@@ -157,7 +157,8 @@ def test_implicit_root_of_one_term_is_the_hand_derivative():
     dx/ds = k, dx/drhs = -s / (c phi(k)), dx/dc = s rhs / (c^2 phi(k)) (differentiate
     c Q(k) = rhs). Through ``implicit_root`` on ``solve_pl`` (the kernel's solver), forward
     and reverse; the values to 1e-9 relative (the root solver's 1e-4 m proof tolerance is not
-    the issue here: the derivative is taken at the Newton-corrected root)."""
+    the issue here: the derivative is taken at the Newton-corrected root); second derivatives
+    by ``jax.hessian`` (forward over reverse)."""
     c, b, s, rhs = 2.0, 0.7, 1.3, 1e-7
 
     def root(theta):
@@ -175,6 +176,13 @@ def test_implicit_root_of_one_term_is_the_hand_derivative():
     want = np.array([s * rhs / (c * c * phi), 1.0, k, -s / (c * phi)])
     np.testing.assert_allclose(jax.jit(jax.grad(root))(theta), want, rtol=1e-9)
     np.testing.assert_allclose(jax.jit(jax.jacfwd(root))(theta), want, rtol=1e-9)
+    # second order (the rule differentiates its own coefficients): x is linear in b and s,
+    # d2x/ds drhs = -1 / (c phi(k)) and d2x/drhs2 = s k / (c^2 phi(k)^2)
+    hess = np.asarray(jax.jit(jax.hessian(root))(theta))
+    assert hess[1, 1] == pytest.approx(0.0, abs=1e-9) and hess[2, 2] == pytest.approx(
+        0.0, abs=1e-9)
+    np.testing.assert_allclose(hess[2, 3], -1.0 / (c * phi), rtol=1e-9)
+    np.testing.assert_allclose(hess[3, 3], s * k / (c * c * phi * phi), rtol=1e-9)
 
 
 def test_fault_free_term_alone_matches_the_hand_derivation(case):
