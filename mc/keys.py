@@ -49,6 +49,9 @@ STREAMS = {
     "risk_ramp": 100,  # + 2 j + direction (0 horizontal, 1 vertical) for SOP j, n = 2 n_sops
     # under the key of one cross-check scenario ("risk_cross_check")
     "risk_rerun": 1,  # the timed second run (the first, compiling run uses the parent key)
+    # under the key of a tower-placement run (studies.tower_placement: key(seed))
+    "placement_random": 0,  # the random placements, one (P, T, 2) draw
+    "placement_candidates": 1,  # the 'auto' candidate sites, one (K, 2) draw
 }
 
 

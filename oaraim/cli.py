@@ -115,6 +115,42 @@ def _print_rows(summary):
 
 
 @app.command()
+def calibrate(
+    study: Annotated[str, typer.Argument(help="study name (see `oaraim list`)")],
+    realizations: Annotated[int | None, typer.Option(
+        help="realizations per run (default: the study's calibration size)")] = None,
+    seed: Annotated[int, typer.Option(help="the one seed of every run")] = 0,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="KEY=VALUE parameter held fixed while fitting")] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the fit here")] = None,
+):
+    """Fit the parameters the paper leaves open to its published numbers; print the fitted
+    values, the residuals and their sensitivities."""
+    from oaraim.calibrate import calibrate as fit
+    from oaraim.execute import parse_sets
+    from oaraim.registry import get_study
+
+    try:
+        s = get_study(study)
+        res = fit(s, realizations=realizations, seed=seed, sets=parse_sets(set_),
+                  say=lambda text: err.print(escape(text), highlight=False))
+    except ValueError as e:
+        _fail(str(e))
+    say = lambda text: out.print(escape(text), highlight=False, soft_wrap=True)  # noqa: E731
+    say(f"{res.study}: {res.realizations:,} realizations per run, {res.evaluations} runs, "
+        f"seed {seed}")
+    for k, v in res.fitted.items():
+        say(f"  {k}: fitted {v:.4g} (default {res.defaults[k]:.4g})")
+    for r in res.targets:
+        el = ", ".join(f"{k} {e:+.2f}" for k, e in res.elasticity[r["quantity"]].items())
+        say(f"  {r['quantity']}: published {r['published']:.4g}, at the default "
+            f"{r['at_default']:.4g}, at the fit {r['at_fit']:.4g} ({100 * r['residual']:+.1f} "
+            f"%); elasticity (dT/T)/(dp/p): {el}")
+    if json_out is not None:
+        json_out.write_text(json.dumps(res._asdict(), indent=2) + "\n")
+
+
+@app.command()
 def report(
     out_dir: Annotated[Path, typer.Option("--out", help="folder holding the study runs")] =
     Path("out"),
@@ -242,109 +278,36 @@ def bench(
         "of 2 worker processes (minutes)")] = False,
     fig4: Annotated[bool, typer.Option(
         "--fig4", help="also seed004-fig4-hpl-maps at its full size (minutes)")] = False,
+    world_map: Annotated[bool, typer.Option(
+        "--world-map", help="also the 1 x 1 deg, 24 h availability map in this process "
+        "(minutes; the accelerator's row where JAX has one)")] = False,
+    only: Annotated[str | None, typer.Option(
+        help="run only these comma-separated parts: startup, latency, slope, mhss, fig3, sky, "
+        "ekf, map, risk (--fig4, --world-map and --dask-map add theirs)")] = None,
+    mhss_batch: Annotated[int | None, typer.Option(
+        help="batch of the MHSS throughput rows (default 65,536, 16,384 with --quick; an "
+        "accelerator wants ~10^6)")] = None,
 ):
     """Throughput of the kernels and the NumPy reference in the same run."""
-    from oaraim import bench as b
+    from oaraim.bench_run import BENCH_PARTS, run_bench
 
-    st = b.bench_startup()
-    out.print(f"start-up: import oaraim {st['import_oaraim_s']:.2f} s, from oaraim import "
-              f"araim, geometry {st['import_araim_geometry_s']:.2f} s, oaraim --help "
-              f"{st['cli_help_s']:.2f} s; first protection_levels call (64 geometries) in a new "
-              f"process {st['first_call_cold_s']:.1f} s compiling, "
-              f"{st['first_call_cached_s']:.1f} s from the compilation cache", highlight=False)
-    lat = b.bench_latency(calls=100 if quick else 300)
-    out.print("protection_levels latency (warm, " + lat["fault_modes"] + "): " + ", ".join(
-        f"batch {n}: median {lat[f'batch_{n}']['median_ms']:.2f} ms, p99 "
-        f"{lat[f'batch_{n}']['p99_ms']:.2f} ms" for n in b.LATENCY_BATCHES), highlight=False)
-
-    res = {"startup": st, "latency": lat}
-    res["slope_hpl"] = b.bench_slope_hpl(batch=65_536 if quick else 262_144,
-                                          ref_geometries=500 if quick else 2_000)
-    s = res["slope_hpl"]
-    out.print(f"slope HPL (M + N = 9): {s['jax_hpl_per_s']:,.0f} HPL/s "
-              f"(batch {s['batch']:,}, best of 5)", highlight=False)
-    out.print(f"  NumPy reference: {s['reference_hpl_per_s']:,.0f} HPL/s -> "
-              f"{s['speedup']:,.0f}x; max relative difference {s['max_rel_diff']:.1e}",
-              highlight=False)
-    m = b.bench_mhss(batch=16_384 if quick else 65_536, ref_geometries=50 if quick else 200)
-    res["mhss"] = m
-    out.print(f"MHSS PLs (9 GPS + 4 SOPs, Table I, {m['n_modes']} modes): "
-              f"{m['jax_pl_per_s']:,.0f} PL/s (batch {m['batch']:,}, best of 5, "
-              f"{m['threads']} host threads; one thread {m['one_thread_pl_per_s']:,.0f} PL/s)",
-              highlight=False)
-    if "speedup" in m:
-        out.print(f"  NumPy reference: {m['reference_pl_per_s']:,.1f} PL/s -> "
-                  f"{m['speedup']:,.0f}x; max |difference| {m['max_abs_diff_m']:.1e} m",
-                  highlight=False)
-    for key, case in (("mhss_add_v42", "table-i-add-v4.2"),
-                      ("mhss_blanch_2012", "blanch-2012-57-modes")):
-        res[key] = m = b.bench_mhss(batch=16_384 if quick else 65_536,
-                                    ref_geometries=20 if quick else 50, case=case)
-        out.print(f"  {case} ({m['fault_modes']}, order {m['order']}, {m['n_modes']} modes): "
-                  f"{m['jax_pl_per_s']:,.0f} PL/s; NumPy reference "
-                  f"{m['reference_pl_per_s']:,.1f} PL/s -> {m['speedup']:,.0f}x; max "
-                  f"|difference| {m['max_abs_diff_m']:.1e} m", highlight=False)
-    p = b.profile_mhss(batch=16_384 if quick else 65_536)
-    res["mhss_profile"] = p
-    out.print(f"  profile ({p['cpu_us_per_pl']:.1f} CPU-us per PL): fault modes "
-              f"{p['fault_modes_s'] / p['total_s']:.0%}, projectors (eqs. 9-12) "
-              f"{p['projectors_s'] / p['total_s']:.0%}, PL root finding "
-              f"{p['pl_root_finding_s'] / p['total_s']:.0%}", highlight=False)
-    from oaraim.bench_grad import bench_gradient
-
-    res["mhss_gradient"] = gr = bench_gradient(batch=4_096 if quick else 16_384)
-    out.print(f"  value and gradient of HPL (all {len(gr['inputs'])} real inputs, one thread, "
-              f"batch {gr['batch']:,}): {gr['value_and_grad_hpl_per_s']:,.0f} HPL/s against "
-              f"{gr['value_hpl_per_s']:,.0f} HPL/s for the value alone: "
-              f"{gr['ratio']:.1f}x its cost (goal <= 3x)", highlight=False)
-    n3 = 100_000 if quick else 1_000_000
-    res["fig3"] = b.bench_fig3(n3)
-    out.print(f"seed001-fig3-elevation at {n3:,} realizations: {res['fig3']['wall_s']:.1f} s "
-              f"wall (compile included)", highlight=False)
-    res["sky"] = b.bench_sky()
-    sk = res["sky"]
-    out.print(f"sky, 1 receiver x 2,880 epochs (24 h at 30 s), nominal GPS + Galileo: "
-              f"{sk['one_receiver_2880_epochs_nominal_s']:.3f} s (target < 1 s)",
-              highlight=False)
-    if "one_receiver_2880_epochs_broadcast_s" in sk:
-        out.print(f"  same from the Villafranca broadcast file ({sk['broadcast_satellites']} "
-                  f"satellites): {sk['one_receiver_2880_epochs_broadcast_s']:.3f} s "
-                  f"(parse {sk['vill_parse_s']:.2f} s, cached per process)", highlight=False)
-    out.print(f"sky, 1,000 receivers x 288 epochs, nominal GPS + Galileo: "
-              f"{sk['receivers_1000_x_288_epochs_nominal_s']:.3f} s (target < 10 s)",
-              highlight=False)
-    from oaraim.bench_ekf import bench_ekf_drive
-
-    runs = 100 if quick else 1000
-    res["ekf_drive"] = e = bench_ekf_drive(runs)
-    out.print(f"EKF-RAIM Monte Carlo, seed 000 drive (1.35 km, 100 Hz IMU), {runs:,} runs, "
-              f"without and with exclusion: {e['wall_s']:.1f} s wall, {e['cpu_s']:.1f} s CPU "
-              f"(first call with compilation {e['first_call_wall_s']:.1f} s; target 1000 runs "
-              f"<= 60 s)", highlight=False)
-    res["availability_map"] = a = b.bench_availability_map(
-        {"lat_deg": "30:50:10", "lon_deg": "0:20:10"} if quick else None)
-    out.print(f"availability-map ({a['service_level']}), {a['users']:,} users x {a['epochs']} "
-              f"epochs: {a['wall_s']:.1f} s wall, compile included ({a['pl_per_s']:,.0f} PL/s; "
-              f"target < 60 s for the world map)", highlight=False)
-    res["integrity_risk"] = r = b.bench_integrity_risk(samples=50_000 if quick else 200_000,
-                                                       ref_samples=50 if quick else 200)
-    out.print(f"integrity risk, MHSS decisions from the linear maps: {r['samples_per_s']:,.0f} "
-              f"samples/s; NumPy reference {r['reference_samples_per_s']:,.1f} samples/s -> "
-              f"{r['speedup']:,.0f}x (detections agree on {r['detection_agreement']:.0%}); one "
-              f"geometry's risk table {r['risk_table_s']:.1f} s; IS vs crude at equal relative "
-              f"error (P = {r['ff_vertical_p']:.1e}): {r['is_speedup_equal_rel_error']:.1e}x",
-              highlight=False)
-    if dask_map:
-        res["availability_map_dask"] = a = b.bench_availability_map(
-            {"lat_deg": "-90:90:1", "lon_deg": "-180:179:1"}, workers=2)
-        out.print(f"availability-map 1 x 1 deg on Dask (2 workers), {a['users']:,} users x "
-                  f"{a['epochs']} epochs: {a['wall_s']:.1f} s wall ({a['pl_per_s']:,.0f} PL/s)",
-                  highlight=False)
+    parts = set(BENCH_PARTS)
+    if only is not None:
+        parts = {p.strip() for p in only.split(",") if p.strip()}
+        unknown = sorted(parts - set(BENCH_PARTS))
+        if unknown:
+            _fail(f"--only: unknown part(s) {', '.join(unknown)}; choose from "
+                  f"{', '.join(BENCH_PARTS)}")
+    if mhss_batch is not None and mhss_batch < 1:
+        _fail(f"--mhss-batch must be a positive integer, got {mhss_batch}")
     if fig4:
-        res["fig4"] = f = b.bench_fig4()
-        out.print(f"seed004-fig4-hpl-maps full size ({f['cells']:,} cells x "
-                  f"{f['realizations']:,}): {f['wall_s']:.1f} s wall, compile included "
-                  f"({f['draws_per_s']:,.0f} draws/s)", highlight=False)
+        parts.add("fig4")
+    if world_map:
+        parts.add("world-map")
+    if dask_map:
+        parts.add("dask-map")
+    res = run_bench(parts, quick=quick, mhss_batch=mhss_batch,
+                    say=lambda text: out.print(text, highlight=False))
     if json_out is not None:
         json_out.write_text(json.dumps(res, indent=2) + "\n")
 

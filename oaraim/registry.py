@@ -24,6 +24,7 @@ STUDY_CLASSES = {
     "seed004-uav": "seed004_uav:Seed004Uav",
     "availability-map": "availability_map:AvailabilityMap",
     "integrity-risk": "integrity_risk:IntegrityRisk",
+    "tower-placement": "tower_placement:TowerPlacement",
 }
 
 

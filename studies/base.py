@@ -4,7 +4,7 @@ import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from oaraim.araim.validate import check_int, check_positive, check_probability, check_range
 
@@ -136,6 +136,43 @@ def axis(parse_one):
     return parse
 
 
+class Free(NamedTuple):
+    """A parameter that ``oaraim calibrate`` fits: a study parameter the paper leaves open."""
+
+    name: str
+    """The study parameter (a key of ``Study.params``, a float)."""
+    low: float
+    """Smallest value tried."""
+    high: float
+    """Largest value tried."""
+
+
+class Target(NamedTuple):
+    """A published number that ``oaraim calibrate`` fits: the summary row whose ``quantity``
+    matches ``pattern`` (``re.search``), its ``published`` against its ``reproduced``."""
+
+    pattern: str
+    """Regular expression found in exactly one summary row's ``quantity``."""
+    weight: float = 1.0
+    """Weight of its relative residual in the fit."""
+
+
+class Calibration(NamedTuple):
+    """How a study's open parameters were chosen (``oaraim calibrate STUDY``): the ``free``
+    parameters are fitted so the ``targets`` rows reproduce their published numbers (least
+    squares of the weighted relative residuals, common random numbers: one seed)."""
+
+    free: tuple
+    """The fitted parameters (``Free``)."""
+    targets: tuple
+    """The published numbers (``Target``)."""
+    realizations: int
+    """Realizations per evaluation (the run's size while fitting)."""
+    sets: dict = {}
+    """Parameter values of the fitting runs (e.g. a smaller grid that leaves the targets as
+    they are); the fitted values apply to the study's defaults."""
+
+
 @dataclass
 class StudyResult:
     """What a study's run returns: its dataset, summary rows, metrics and extra provenance."""
@@ -170,6 +207,9 @@ class Study:
     params: dict = {}
     #: registry name (``oaraim.data``) of the real file that ``--set nav=auto`` uses, if any
     nav_file: str = ""
+    #: how ``oaraim calibrate`` fits the parameters the paper leaves open (``Calibration``),
+    #: or None where nothing is fitted
+    calibration: "Calibration | None" = None
 
     def data_files(self, params: dict) -> tuple:
         """Registry names (``oaraim data list``) of the real files a run with ``params`` reads:

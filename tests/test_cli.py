@@ -51,6 +51,26 @@ def test_other_bad_inputs(setting, field):
     assert field in _one_error_line(r)
 
 
+@pytest.mark.parametrize("args, words", [(("--only", "mhss,gpu"), ("gpu", "latency", "risk")),
+                                         (("--mhss-batch", "0"), ("--mhss-batch", "0"))])
+def test_bad_bench_options_are_one_line(args, words):
+    r = _run("bench", *args)
+    assert r.exit_code == 2
+    line = _one_error_line(r)
+    assert all(w in line for w in words)
+
+
+def test_bench_tables_of_two_runs_share_one_header():
+    from oaraim.bench import combined_table
+
+    cpu = {"fig3": {"realizations": 10, "wall_s": 1.0, "host": {"cpus": 2, "jax": "0.1"}}}
+    gpu = {"fig3": {"realizations": 10, "wall_s": 0.5, "host": {
+        "cpus": 16, "jax": "0.1", "backend": "gpu", "device": "NVIDIA H200"}}}
+    lines = combined_table([cpu, gpu]).splitlines()
+    assert len(lines) == 4 and lines[0].startswith("| kernel")
+    assert "| 2 cores, JAX 0.1 |" in lines[2] and "NVIDIA H200 (16 cores host)" in lines[3]
+
+
 def test_list_shows_studies_and_parameters():
     r = _run("list")
     assert r.exit_code == 0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from oaraim.bench import TABLE_BEGIN, TABLE_END, markdown_table
+from oaraim.bench import TABLE_BEGIN, TABLE_END, combined_table
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -34,12 +34,14 @@ def _table_block(text):
     return text.split(TABLE_BEGIN, 1)[1].split(TABLE_END, 1)[0].strip()
 
 
-@pytest.mark.parametrize("page", [README, DOCS / "benchmarks.md"], ids=lambda p: p.name)
-def test_bench_table_matches_committed_json(page):
-    """The table is generated from docs/bench.json; regenerate it with
-    `python -m oaraim.bench --table docs/bench.json --update README.md
-    docs/benchmarks.md`."""
-    expected = markdown_table(json.loads((DOCS / "bench.json").read_text()))
+@pytest.mark.parametrize("page, runs", [
+    (README, ["bench.json"]), (DOCS / "benchmarks.md", ["bench.json", "bench_gpu.json"])],
+    ids=["README.md", "benchmarks.md"])
+def test_bench_table_matches_committed_json(page, runs):
+    """The README's table is generated from docs/bench.json (the CPU run), docs/benchmarks.md's
+    from it and docs/bench_gpu.json (a run on a GPU); regenerate them with `python -m
+    oaraim.bench --table docs/bench.json [docs/bench_gpu.json] --update PAGE`."""
+    expected = combined_table([json.loads((DOCS / r).read_text()) for r in runs])
     assert _table_block(page.read_text()) == expected
 
 
