@@ -584,6 +584,15 @@ def markdown_table(bench_json: dict) -> str:
         rows.append((what, f"{case}, {m['n_modes']} modes, order {m['order']}, batch "
                      f"{m['batch']:,}, {m['threads']} threads",
                      _rate(m["jax_pl_per_s"], "PL/s"), *ref, *host(m)))
+    if "mhss_gradient" in bench_json:
+        gr = bench_json["mhss_gradient"]
+        rows.append(("value and gradient of HPL per second (`jax.value_and_grad` through "
+                     "`araim.protection_levels_kernel`, implicit-function PL derivative)",
+                     f"9 GPS + 4 SOPs, Table I, `grouped`, batch {gr['batch']:,}, 1 thread, "
+                     "w.r.t. rows, variances, b_nom, P_s, P_const",
+                     f"{_rate(gr['value_and_grad_hpl_per_s'], 'HPL/s')} (value alone "
+                     f"{_rate(gr['value_hpl_per_s'], 'HPL/s')}: {gr['ratio']:.1f}x its cost)",
+                     "-", "-", *host(gr)))
     if "fig3" in bench_json:
         f = bench_json["fig3"]
         rows.append(("`seed001-fig3-elevation` study", f"{f['realizations']:,} realizations",

@@ -79,7 +79,7 @@ def _params():
     # (test_switch_flags_mark_the_bench_emt_edge); 0.8e-5 keeps them 20 % below
     p["p_sat"][:, :N_GPS] = BENCH_GPS_P_SAT
     valid = x["valid"].copy()
-    p["p_sat"][12], p["p_const"][12], p["b_nom_m"][12] = 0.0, 0.0, 0.0  # fault-free term alone
+    p["p_sat"][12], p["p_const"][12] = 0.0, 0.0  # the fault-free term alone
     valid[13, -1] = False  # a padding source holding junk
     p["var_int_m2"][13, -1], p["b_nom_m"][13, -1], p["p_sat"][13, -1] = -1.0, 7.0, 0.5
     valid[14, 4:] = False  # 4 GPS only: too few sources
@@ -108,21 +108,30 @@ def _outputs(p, valid, constellation):
     return {k: getattr(r, k) for k in OUTPUTS} | {"status": r.status, "pl_enu_m": r.pl_enu_m}
 
 
+# One jitted program; the derivatives below are taken of it from outside (not jitted
+# themselves), so that JAX compiles its JVP and its linearization once and every test, and
+# check_grads, reuses them (compilation is most of this file's time)
 _value = jax.jit(_outputs)
 
 
-@jax.jit
 def _jvp(p, valid, constellation, v):
-    return jax.jvp(lambda q: _outputs(q, valid, constellation), (p,), (v,))[1]
+    return jax.jvp(lambda q: _value(q, valid, constellation), (p,), (v,))[1]
 
 
-@jax.jit
+def _total(out):
+    """The sum of every finite output of every geometry (inf ones count 0)."""
+    return sum(jnp.sum(jnp.where(jnp.isfinite(out[k]), out[k], 0.0)) for k in OUTPUTS)
+
+
 def _grad_of_sum(p, valid, constellation):
-    """The gradient of the sum of every output of every geometry (inf ones included)."""
-    def total(q):
-        out = _outputs(q, valid, constellation)
-        return sum(jnp.sum(jnp.where(jnp.isfinite(out[k]), out[k], 0.0)) for k in OUTPUTS)
-    return jax.grad(total)(p)
+    """The gradient of ``_total``: each geometry's gradient of its HPL + VPL + EMT +
+    sigma_acc (the geometries are independent)."""
+    return jax.grad(lambda q: _total(_value(q, valid, constellation)))(p)
+
+
+#: check_grads' coordinates u: p = p0 + scale u, one step eps = 1e-4 in u is the FD step of
+#: ``STEPS`` in every kind (relative kinds: scale p0; positions horizontal)
+U_SCALE = {k: h / 1e-4 for k, h in STEPS.items()}
 
 
 def _direction(p, kind, seed):
@@ -157,7 +166,8 @@ def test_implicit_root_of_one_term_is_the_hand_derivative():
     dx/ds = k, dx/drhs = -s / (c phi(k)), dx/dc = s rhs / (c^2 phi(k)) (differentiate
     c Q(k) = rhs). Through ``implicit_root`` on ``solve_pl`` (the kernel's solver), forward
     and reverse; the values to 1e-9 relative (the root solver's 1e-4 m proof tolerance is not
-    the issue here: the derivative is taken at the Newton-corrected root)."""
+    the issue here: the derivative is taken at the Newton-corrected root); second derivatives
+    by ``jax.hessian`` (forward over reverse)."""
     c, b, s, rhs = 2.0, 0.7, 1.3, 1e-7
 
     def root(theta):
@@ -175,55 +185,61 @@ def test_implicit_root_of_one_term_is_the_hand_derivative():
     want = np.array([s * rhs / (c * c * phi), 1.0, k, -s / (c * phi)])
     np.testing.assert_allclose(jax.jit(jax.grad(root))(theta), want, rtol=1e-9)
     np.testing.assert_allclose(jax.jit(jax.jacfwd(root))(theta), want, rtol=1e-9)
+    # second order (the rule differentiates its own coefficients): x is linear in b and s,
+    # d2x/ds drhs = -1 / (c phi(k)) and d2x/drhs2 = s k / (c^2 phi(k)^2)
+    hess = np.asarray(jax.jit(jax.hessian(root))(theta))
+    assert hess[1, 1] == pytest.approx(0.0, abs=1e-9) and hess[2, 2] == pytest.approx(
+        0.0, abs=1e-9)
+    np.testing.assert_allclose(hess[2, 3], -1.0 / (c * phi), rtol=1e-9)
+    np.testing.assert_allclose(hess[3, 3], s * k / (c * c * phi * phi), rtol=1e-9)
 
 
 def test_fault_free_term_alone_matches_the_hand_derivation(case):
-    """Row 12: every prior 0 and b_nom 0, so PL_q = sigma_q^(0) k_q with k_q = Q^-1(rhs_q / 2)
-    and sigma_q^(0)2 = (N^-1)_qq, N = H^T C_int^-1 H (H with the clock columns). With
-    d(N^-1) = -N^-1 dN N^-1 and dN = -h_l h_l^T dvar_l / var_l^2: dPL_q / dvar_l =
-    k_q (N^-1 h_l)_q^2 / (2 sigma_q var_l^2); dPL_q / db_l = |S_ql| with S = N^-1 H^T W;
-    dsigma_acc / dvar_acc,l = S_ul^2 / (2 sigma_acc). HPL = hypot(PL_E, PL_N)."""
+    """Row 12: every prior 0, so PL_q = b_q + sigma_q k_q with k_q = Q^-1(rhs_q / 2),
+    sigma_q^2 = (N^-1)_qq, N = H^T W H (H with the clock columns, W = C_int^-1), and
+    b_q = sum_m |S_qm| b_m, S = N^-1 H^T W. With dW = -e_l e_l^T dvar_l / var_l^2:
+    d(N^-1) = -N^-1 dN N^-1 gives dsigma_q / dvar_l = (N^-1 h_l)_q^2 / (2 sigma_q var_l^2),
+    and dS = N^-1 H^T dW (I - H S) gives dS_qm / dvar_l = -(N^-1 h_l)_q (I - H S)_lm /
+    var_l^2; dPL_q / db_l = |S_ql|; sigma_acc = sqrt(S_u C_acc S_u^T) moves with both
+    variances. HPL = hypot(PL_E, PL_N) of the kernel's PLs (roots + the solver's margin,
+    ``PL_MARGIN_M``, which enter hypot's chain rule at ~1e-8 relative)."""
     p, valid, constellation = case
     grads = _grad_of_sum(p, valid, constellation)
-    jv = [_jvp(p, valid, constellation, _direction(p, kind, 0)) for kind in (
-        "var_int_m2", "var_acc_m2")]
     src = _sources(p, valid, constellation)
     i = 12
-    g, var, var_acc = (np.asarray(x[i]) for x in (src.g, src.var_int_m2, src.var_acc_m2))
+    g, var, var_acc, b = (np.asarray(x[i]) for x in (src.g, src.var_int_m2, src.var_acc_m2,
+                                                      src.b_nom_m))
     const = np.asarray(src.constellation[i])
     h = np.concatenate([g, (const[:, None] == np.arange(2)).astype(float)], axis=1)
     n_inv = np.linalg.inv(h.T @ (h / var[:, None]))
     s = n_inv @ h.T / var
+    u = (n_inv @ h.T)[:3]  # (N^-1 h_l)_q
+    resid = np.eye(len(var)) - h @ s
     sigma = np.sqrt(np.diag(n_inv)[:3])
     k = -special.ndtri(np.array([BUDGET.phmi_h / 4, BUDGET.phmi_h / 4, BUDGET.phmi_v / 2]))
-    dpl_dvar = k[:, None] * (n_inv @ h.T)[:3] ** 2 / (2.0 * sigma[:, None] * var ** 2)
     out = _value(p, valid, constellation)
-    # the kernel's PLs: the roots plus the solver's margin (PL_MARGIN_M, 1e-6 m), which enter
-    # the HPL's chain rule (with the roots themselves it would differ by ~1e-8 relative)
     pl = np.asarray(out["pl_enu_m"][i])
-    np.testing.assert_allclose(pl, sigma * k, atol=1e-3)  # the solver's tolerance
-    hpl = np.hypot(pl[0], pl[1])
-    dhpl = (pl[0] * dpl_dvar[0] + pl[1] * dpl_dvar[1]) / hpl
+    np.testing.assert_allclose(pl, np.abs(s[:3]) @ b + sigma * k, atol=1e-3)  # solver tol.
     assert float(out["emt_m"][i]) == 0.0
+    d_bias = -u / var ** 2 * ((np.sign(s[:3]) * b) @ resid.T)  # (3, L): db_q / dvar_l
+    dpl_dvar = k[:, None] * u ** 2 / (2.0 * sigma[:, None] * var ** 2) + d_bias
+    hpl = np.hypot(pl[0], pl[1])
     sigma_acc = np.sqrt(s[2] ** 2 @ var_acc)
     d_acc = s[2] ** 2 / (2.0 * sigma_acc)
-    # sigma_acc also moves with C_int (the weights of S): dS = N^-1 H^T dW (I - H S), dW =
-    # -e_l e_l^T dvar_l / var_l^2, so dS_u = -(N^-1 h_l)_u r_l / var_l^2 with r_l row l of
-    # I - H S, and dsigma_acc = S_u C_acc dS_u^T / sigma_acc
-    resid = np.eye(len(var)) - h @ s
-    d_acc_int = -(n_inv @ h.T)[2] * (resid @ (s[2] * var_acc)) / (var ** 2 * sigma_acc)
-    # the sum's gradient: HPL + VPL + sigma_acc (EMT: 0) by var_int; sigma_acc by var_acc;
-    # HPL + VPL by b_nom (hypot's chain rule on PL_q = b_q + sigma_q k_q, b_q = |S_q| b)
-    np.testing.assert_allclose(grads["var_int_m2"][i], dhpl + dpl_dvar[2] + d_acc_int,
+    d_acc_int = -u[2] * (resid @ (s[2] * var_acc)) / (var ** 2 * sigma_acc)
+    dhpl_dvar = (pl[0] * dpl_dvar[0] + pl[1] * dpl_dvar[1]) / hpl
+    np.testing.assert_allclose(grads["var_int_m2"][i], dhpl_dvar + dpl_dvar[2] + d_acc_int,
                                rtol=1e-9)
     np.testing.assert_allclose(grads["var_acc_m2"][i], d_acc, rtol=1e-9)
     db = (pl[0] * np.abs(s[0]) + pl[1] * np.abs(s[1])) / hpl + np.abs(s[2])
     np.testing.assert_allclose(grads["b_nom_m"][i], db, rtol=1e-9)
-    v = [_direction(p, kind, 0) for kind in ("var_int_m2", "var_acc_m2")]
-    np.testing.assert_allclose(jv[0]["vpl_m"][i], dpl_dvar[2] @ np.asarray(v[0]["var_int_m2"][i]),
-                               rtol=1e-9)
-    np.testing.assert_allclose(jv[1]["sigma_acc_u_m"][i], d_acc @ np.asarray(
-        v[1]["var_acc_m2"][i]), rtol=1e-9)
+    # forward mode, VPL alone and sigma_acc alone
+    v = _direction(p, "var_int_m2", 0)
+    np.testing.assert_allclose(_jvp(p, valid, constellation, v)["vpl_m"][i],
+                               dpl_dvar[2] @ np.asarray(v["var_int_m2"][i]), rtol=1e-9)
+    v = _direction(p, "var_acc_m2", 0)
+    np.testing.assert_allclose(_jvp(p, valid, constellation, v)["sigma_acc_u_m"][i],
+                               d_acc @ np.asarray(v["var_acc_m2"][i]), rtol=1e-9)
 
 
 def test_bench_rows_are_away_from_switches(case):
@@ -333,19 +349,33 @@ def test_vmap_of_per_geometry_gradients_matches_the_batch(case):
 
 def test_check_grads_forward_and_reverse(case):
     """``jax.test_util.check_grads`` (order 1, modes fwd and rev) on the sum of the finite
-    outputs as a function of relative changes of the variances and priors and of small
-    angle changes (rad / 10): its own random direction, eps 1e-4, rtol 1e-5."""
+    outputs in the coordinates u of ``U_SCALE`` (its eps 1e-4 is then the FD step of every
+    kind; relative kinds scaled by their value, so P_s = 0 and b_nom = 0 stay put), along its
+    own random direction over every input at once: rtol 1e-5, atol 1e-10 m / 1e-4 (the FD
+    noise of the module docstring)."""
     p, valid, constellation = case
+    scale = {k: jnp.asarray(U_SCALE[k] * (np.asarray(p[k]) if k in RELATIVE or k == "b_nom_m"
+                                           else 1.0)) for k in p}
+    scale = {k: v * HORIZONTAL if k in ("tower_enu_m", "receiver_enu_m") else v
+             for k, v in scale.items()}
 
-    def total(u_var, u_prior, u_angle):
-        q = dict(p)
-        q["var_int_m2"] = p["var_int_m2"] * (1.0 + u_var)
-        q["p_sat"] = p["p_sat"] * (1.0 + u_prior)
-        q["gps_el_rad"] = p["gps_el_rad"] + 0.1 * u_angle
-        out = _outputs(q, valid, constellation)
-        return sum(jnp.sum(jnp.where(jnp.isfinite(out[k]), out[k], 0.0)) for k in OUTPUTS)
+    def total(u):
+        q = {k: p[k] + scale[k] * u[k] for k in p}
+        return _total(_value(q, valid, constellation))
 
-    zeros = (jnp.zeros(p["var_int_m2"].shape), jnp.zeros(p["p_sat"].shape),
-             jnp.zeros(p["gps_el_rad"].shape))
-    check_grads(jax.jit(total), zeros, order=1, modes=("fwd", "rev"), eps=1e-4, rtol=1e-5,
-                atol=1e-8)
+    u0 = {k: jnp.zeros(x.shape) for k, x in p.items()}
+    check_grads(total, (u0,), order=1, modes=("fwd", "rev"), eps=1e-4, rtol=1e-5,
+                atol=VALUE_NOISE_M / 1e-4)
+
+
+def test_bench_table_has_the_gradient_row():
+    """``oaraim bench`` stores ``mhss_gradient`` (``oaraim.bench_grad``); the table shows both
+    throughputs and their cost ratio beside each other."""
+    from oaraim.bench import markdown_table
+
+    entry = {"batch": 16_384, "value_hpl_per_s": 250_000.0, "value_and_grad_hpl_per_s":
+             25_000.0, "ratio": 10.0, "host": {"cpus": 2, "jax": "0.10.2", "date": "2026-12-04"}}
+    rows = markdown_table({"mhss_gradient": entry}).splitlines()[2:]
+    assert len(rows) == 1
+    assert "value and gradient of HPL per second" in rows[0]
+    assert "25,000 HPL/s (value alone 250,000 HPL/s: 10.0x its cost)" in rows[0]
