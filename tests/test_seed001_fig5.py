@@ -1,8 +1,8 @@
 """Seed 001 Fig. 5 study: kernel against the NumPy oracle, chunk invariance, sky fallback."""
 
 import json
-from pathlib import Path
 import warnings
+from pathlib import Path
 
 import jax
 import numpy as np
