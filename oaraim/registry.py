@@ -25,6 +25,7 @@ STUDY_CLASSES = {
     "availability-map": "availability_map:AvailabilityMap",
     "integrity-risk": "integrity_risk:IntegrityRisk",
     "tower-placement": "tower_placement:TowerPlacement",
+    "sop-requirements": "sop_requirements:SopRequirements",
 }
 
 

@@ -130,7 +130,11 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          # compiles; one descent of 3 steps, 2 of 5 sites
           "tower-placement": {"nav": "nominal", "grid_n": "2", "sky_step_s": "21600",
                              "iterations": "3", "starts": "1", "n_candidates": "5",
-                             "n_select": "2"}}
+                             "n_select": "2"},
+         # one (n_sops, order) program: 2 SOPs at P_s^S 1e-4 (order 1), a 1 x 1 map
+         "sop-requirements": {"n_sops": "2", "p_s_sop": "1e-4", "check_p_s": "1e-4",
+                              "map_n_sops": "2", "map_sigma_ura_sop_m": "5",
+                              "map_p_s_sop": "1e-4"}}
 
 
 def _n(study, n, params=None):
