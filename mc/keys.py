@@ -49,6 +49,11 @@ STREAMS = {
     "risk_ramp": 100,  # + 2 j + direction (0 horizontal, 1 vertical) for SOP j, n = 2 n_sops
     # under the key of one cross-check scenario ("risk_cross_check")
     "risk_rerun": 1,  # the timed second run (the first, compiling run uses the parent key)
+    # under the key of one simulated drive run (sim.drive: split(key, 3) holds 0..2)
+    "world_calibration": 3,  # the GNSS period's SOP errors (sim.measurement.calibrate)
+    # under the key of one drive epoch (sim.measurement.drive_epoch; normal(key) is the rest)
+    "world_sop": 0,  # normals: tower clock epsilon_n and the operators' common terms
+    "world_nlos": 1,  # uniforms: NLOS episode starts, ends and excess delays
 }
 
 
