@@ -353,3 +353,30 @@ def drive_epoch(key, state: WorldState, gyro_true, accel_true, t_s, pos_m, tower
             + fault_bias_m(t_s, err.fault_onset_s, err.fault_bias_m, err.fault_tower, n_t))
     z = pseudorange_true(pos_m, towers_m, clk[0], tower_clk_m) + bias + err.sigma_pr_m * w_pr
     return state, EpochMeasurements(gm, am, z, bias)
+
+
+def sop_errors(key, err: ErrorModel, t_s, n_towers: int, t_cal_s, operator=None):
+    """The SOP pseudorange errors of ``n_towers`` towers at the epochs ``t_s`` (T,) (s from the
+    end of the GNSS period, increasing, > 0) in the world ``err``, without the receiver: the
+    GNSS period (``calibrate`` at ``t_cal_s``), then ``sop_step`` epoch by epoch plus the white
+    noise and the injected fault, from ``fold_in(stream(key, "world_sop_epochs"), e)``. For the
+    snapshot studies (``sim.gnss``). Returns ``(errors (T, L) m, empirical sigma m)``."""
+    operator = jnp.zeros(n_towers, int) if operator is None else operator
+    z = jnp.zeros(n_towers)
+    st = WorldState(jnp.zeros(3), jnp.zeros(3), jnp.zeros(2), z, z, z,
+                    jnp.zeros((n_towers, 2)), jnp.zeros((n_towers, 2)))
+    st, sig = calibrate(key, st, err, operator, t_cal_s)
+    k0 = stream(key, "world_sop_epochs")
+    dts = jnp.diff(t_s, prepend=0.0)
+
+    def body(s, x):
+        e, t, dt = x
+        k = jax.random.fold_in(k0, e)
+        w = jax.random.normal(k, (2, n_towers))
+        s = sop_step(k, w[0], s, err, dt)
+        out = (sop_error_m(s, t, operator) + err.sigma_pr_m * w[1]
+               + fault_bias_m(t, err.fault_onset_s, err.fault_bias_m, err.fault_tower, n_towers))
+        return s, out
+
+    _, y = jax.lax.scan(body, st, (jnp.arange(t_s.shape[0]), t_s, dts))
+    return y, sig
