@@ -251,3 +251,22 @@ def test_realistic_world_is_harsher_than_the_clean_one(mi_runs):
     assert np.median(np.asarray(rw.rmse_2d_m)[:, 0]) > np.median(np.asarray(cl.rmse_2d_m)[:, 0])
     assert np.all(np.asarray(rw.filter_sigma_m) > 0)
     assert np.sum(np.asarray(rw.n_false_alarms)) > np.sum(np.asarray(cl.n_false_alarms))
+
+
+def test_gnss_errors_variance_adds_up():
+    """``sim.gnss_errors`` at one elevation (30 deg) over 4,000 satellites (stationary start):
+    the variance is the sum of its terms, (2/3 URA)^2 + b_nom^2 / 3 (uniform) + sigma_tropo^2 +
+    sigma_iono^2 + (scale x iono-free x sigma_MP)^2 + (iono-free x sigma_noise)^2, by the ADD
+    formulas of araim.error_models. Relative sd of the sample variance sqrt(2 / 4000) = 2.2 %
+    (the uniform term changes it little): 10 % is > 4 sd."""
+    from oaraim.araim import error_models as em
+    gm = sim.GnssErrorModel(sigma_iono_m=0.4)
+    el = jnp.full((3, 4000), np.deg2rad(30.0))
+    e = np.asarray(sim.gnss_errors(jax.random.key(4), jnp.array([0.0, 1.0, 2.0]), el, 1.0, gm))
+    iff = em.iono_free_factor()
+    want = ((2 / 3) ** 2 + 0.75**2 / 3 + float(em.sigma_tropo_m(el[0, 0])) ** 2 + 0.4**2
+            + (2.0 * iff * float(em.sigma_multipath_m(el[0, 0]))) ** 2
+            + (iff * float(em.sigma_noise_m(el[0, 0]))) ** 2)
+    assert np.var(e[2]) == pytest.approx(want, rel=0.1)
+    # time-correlated: consecutive epochs 1 s apart are strongly correlated (URE, troposphere)
+    assert np.corrcoef(e[1], e[2])[0, 1] > 0.3
