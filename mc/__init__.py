@@ -5,6 +5,7 @@ if __name__ != "oaraim.mc":  # the source folder is importable from the checkout
     raise ImportError(f"import oaraim.mc, not {__name__}: the folder mc/ installs as "
                       "oaraim.mc (pip install -e .), which also enables JAX's float64 mode")
 
+from oaraim.mc.intervals import clopper_pearson, rate_with_interval
 from oaraim.mc.keys import STREAMS, realization_keys, stream
 from oaraim.mc.reduce import BLOCK, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import ChunkPlan, run_chunked
@@ -28,7 +29,9 @@ __all__ = [
     "Storage",
     "SweepResult",
     "Values",
+    "clopper_pearson",
     "provenance",
+    "rate_with_interval",
     "read_summary",
     "realization_keys",
     "run_chunked",

@@ -52,6 +52,14 @@ STREAMS = {
     # under the key of a tower-placement run (studies.tower_placement: key(seed))
     "placement_random": 0,  # the random placements, one (P, T, 2) draw
     "placement_candidates": 1,  # the 'auto' candidate sites, one (K, 2) draw
+    # under the key of one simulated drive run (sim.drive: split(key, 3) holds 0..2)
+    "world_calibration": 3,  # the GNSS period's SOP errors (sim.measurement.calibrate)
+    # under the key of one snapshot noise draw (sim.measurement.sop_errors, sim.gnss)
+    "world_sop_epochs": 4,  # the SOP errors epoch by epoch (fold_in by epoch below it)
+    "world_gnss": 5,  # the GNSS errors of sim.gnss.gnss_errors
+    # under the key of one drive epoch (sim.measurement.drive_epoch; normal(key) is the rest)
+    "world_sop": 0,  # normals: tower clock epsilon_n and the operators' common terms
+    "world_nlos": 1,  # uniforms: NLOS episode starts, ends and excess delays
 }
 
 

@@ -21,9 +21,10 @@ def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:
     scenario = sim.drive_seed000()
     setup = sim.drive_setup(scenario)
     keys = jax.random.split(jax.random.key(seed), runs)
-    fn = jax.jit(lambda k: sim.monte_carlo_drive(
-        k, setup, sigma_pr_m=scenario.sigma_pr_m, fault_tower=scenario.fault_tower,
-        fault_onset_s=scenario.fault_onset_s, fault_bias_m=scenario.fault_bias_m))
+    # the default (realistic) error world with the scenario's fault (issue 25)
+    err = sim.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
+                         fault_bias_m=scenario.fault_bias_m)
+    fn = jax.jit(lambda k: sim.monte_carlo_drive(k, setup, err=err))
     t0, c0 = time.perf_counter(), time.process_time()
     out = jax.block_until_ready(fn(keys))
     compile_wall = time.perf_counter() - t0

@@ -8,8 +8,8 @@ recording draws from; ``sim.trajectory`` the scenarios (truth motion, tower layo
 SOP epochs of the snapshot studies; ``sim.recordings`` simulated runs in the recorded-data
 format.
 
-Layering: ``sim`` imports ``geometry`` and, to run a receiver over a simulated drive,
-``araim``; ``araim`` and ``geometry`` never import ``sim``.
+Layering: ``sim`` imports ``geometry``, ``mc`` (the named key streams) and, to run a receiver
+over a simulated drive, ``araim``; ``araim`` and ``geometry`` never import ``sim``.
 """
 
 if __name__ != "oaraim.sim":  # the source folder is importable from the checkout's root
@@ -27,16 +27,26 @@ from oaraim.sim.drive import (
     monte_carlo_drive,
     simulate_drive,
 )
-from oaraim.sim.gnss import epoch_times, pseudoranges, scenario_geometry, to_recording
+from oaraim.sim.gnss import (
+    GnssErrorModel,
+    epoch_times,
+    gnss_errors,
+    pseudoranges,
+    scenario_geometry,
+    to_recording,
+)
 from oaraim.sim.measurement import (
     EpochMeasurements,
     ErrorModel,
     WorldState,
+    calibrate,
+    clock_fit,
     drive_epoch,
     fault_bias_m,
     pseudorange_from_range,
     pseudorange_sample,
     pseudorange_true,
+    sop_errors,
 )
 from oaraim.sim.recordings import example_recording, synthesize_recording
 from oaraim.sim.trajectory import (
@@ -50,11 +60,12 @@ from oaraim.sim.trajectory import (
 )
 
 __all__ = [
-    "SCENARIOS", "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel",
-    "InitialDraw", "Scenario", "Segment", "Trajectory", "WorldState", "drive", "drive_epoch",
-    "drive_seed000", "drive_seed002", "drive_setup", "epoch_times", "example_recording",
-    "fault_bias_m", "gnss", "initial_draw", "measurement", "monte_carlo_drive",
-    "pseudorange_from_range", "pseudorange_sample", "pseudorange_true", "pseudoranges",
-    "recordings", "scenario_geometry", "simulate_drive", "synthesize_recording", "to_recording",
-    "trajectory", "uav_seed004",
+    "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel",
+    "GnssErrorModel", "InitialDraw", "SCENARIOS", "Scenario", "Segment", "Trajectory",
+    "WorldState", "calibrate", "clock_fit", "drive", "drive_epoch", "drive_seed000",
+    "drive_seed002", "drive_setup", "epoch_times", "example_recording", "fault_bias_m", "gnss",
+    "gnss_errors", "initial_draw", "measurement", "monte_carlo_drive", "pseudorange_from_range",
+    "pseudorange_sample", "pseudorange_true", "pseudoranges", "recordings", "scenario_geometry",
+    "simulate_drive", "sop_errors", "synthesize_recording", "to_recording", "trajectory",
+    "uav_seed004",
 ]

@@ -1,12 +1,12 @@
 """Monte Carlo drives: one simulated run of a ``sim.trajectory`` scenario through the
 receiver's EKF-RAIM (seed 000 sections II-IV, seed 002).
 
-``simulate_drive`` draws one run of the world (``sim.measurement.drive_epoch``: IMU noise and
-GM biases, receiver clock, multipath, pseudoranges and the injected fault, from
-``fold_in(key, epoch)``) inside a ``lax.scan`` over pseudorange epochs, so nothing of size
-runs x epochs is stored, feeds each epoch to the receiver (``araim.ekf_raim.raim_update``,
-without and with exclusion side by side) and returns per-run summaries;
-``monte_carlo_drive`` vmaps it over runs.
+``simulate_drive`` draws one run of the world (``sim.measurement.calibrate``: the GNSS period,
+then ``sim.measurement.drive_epoch``: IMU noise and GM biases, receiver clock, the SOP errors of
+the ``ErrorModel``, pseudoranges and the injected fault, from ``fold_in(key, epoch)``) inside a
+``lax.scan`` over pseudorange epochs, so nothing of size runs x epochs is stored, feeds each
+epoch to the receiver (``araim.ekf_raim.raim_update``, without and with exclusion side by side)
+and returns per-run summaries; ``monte_carlo_drive`` vmaps it over runs.
 """
 
 from functools import partial
@@ -28,14 +28,17 @@ from oaraim.araim.ekf_raim import (
 )
 from oaraim.geometry import clocks, imu
 from oaraim.sim import trajectory
-from oaraim.sim.measurement import ErrorModel, WorldState, drive_epoch
+from oaraim.sim.measurement import ErrorModel, WorldState, calibrate, drive_epoch
 
 
 class DriveSummary(NamedTuple):
     """Per-run summaries; arrays of shape (2,) are [without exclusion, with exclusion].
 
     Times in s (inf: never); counts are integers; NEES/NIS are means over the epochs of the run
-    (NIS over the valid towers before exclusion; ``nis_dof_mean`` its mean d = N_s)."""
+    (NIS over the valid towers before exclusion; ``nis_dof_mean`` its mean d = N_s);
+    ``n_misleading`` counts the epochs with 2D error > HPL (misleading information);
+    ``filter_sigma_m`` is the pseudorange sigma the filter used (the run's empirical estimate,
+    or the one given), the same for both filters."""
 
     rmse_2d_m: jnp.ndarray
     max_2d_m: jnp.ndarray
@@ -50,6 +53,7 @@ class DriveSummary(NamedTuple):
     hpl_max_m: jnp.ndarray
     n_alarms: jnp.ndarray
     n_misleading: jnp.ndarray
+    filter_sigma_m: jnp.ndarray
 
 
 class DriveTrace(NamedTuple):
@@ -78,14 +82,20 @@ class DriveSetup(NamedTuple):
     spec: imu.ImuSpec
     P0: jnp.ndarray
     tables: RaimTables
+    operator: jnp.ndarray     # (L,) each tower's operator 0..L-1 (its common clock term)
+    calib_t_s: jnp.ndarray    # (n_cal,) epochs of the GNSS period, the last at t = 0
 
 
 def drive_setup(scenario: trajectory.Scenario, spec: imu.ImuSpec | None = None,
                 init: InitialUncertainty | None = None, cfg: RaimConfig | None = None,
-                duration_s: float | None = None) -> DriveSetup:
+                duration_s: float | None = None, operator=None,
+                calib_s: float = 300.0, calib_rate_hz: float = 1.0) -> DriveSetup:
     """Host-side preparation of ``simulate_drive`` (optionally truncated to ``duration_s``):
     the scenario's truth cut into pseudorange epochs, the tower clocks at the epochs, the EKF
-    parameters of ``spec`` (default VN-100), P0 of ``init`` and the RAIM tables of ``cfg``."""
+    parameters of ``spec`` (default VN-100), P0 of ``init``, the RAIM tables of ``cfg``, the
+    towers' operators (default: one operator, seed 000's AT&T) and the longest GNSS period
+    ``calib_s`` an ``ErrorModel.calib_window_s`` may use, sampled at ``calib_rate_hz`` (its
+    epochs are simulated in every run: 300 at the defaults)."""
     spec = imu.vn100() if spec is None else spec
     init = InitialUncertainty() if init is None else init
     cfg = RaimConfig() if cfg is None else cfg
@@ -106,7 +116,10 @@ def drive_setup(scenario: trajectory.Scenario, spec: imu.ImuSpec | None = None,
         towers=scenario.towers_enu_m,
         params=_ekf.params_from_imu(spec, dt, tr.gravity_m_s2),
         spec=spec, P0=initial_covariance(spec, init),
-        tables=raim_tables(cfg.p_fa, cfg.p_md, l))
+        tables=raim_tables(cfg.p_fa, cfg.p_md, l),
+        operator=jnp.zeros(l, int) if operator is None else jnp.asarray(operator, int),
+        calib_t_s=-jnp.arange(max(int(round(calib_s * calib_rate_hz)), 2))[::-1]
+        / calib_rate_hz)
 
 
 def nees_of_state(state: _ekf.EkfState, q, r, v, bg, ba, clk):
@@ -121,48 +134,68 @@ def nees_of_state(state: _ekf.EkfState, q, r, v, bg, ba, clk):
 
 class InitialDraw(NamedTuple):
     """The draws of a run's start: the key of the per-epoch draws, the world's initial error
-    state (``WorldState``) and the receiver's initial estimate (JPL quaternion (4,), position
-    and velocity (3,) ENU), which is the truth minus an error drawn from N(0, P0)."""
+    state (``WorldState``, after the GNSS period), the receiver's initial estimate (JPL
+    quaternion (4,), position and velocity (3,) ENU), which is the truth minus an error drawn
+    from N(0, P0), and the pseudorange sigma the receiver estimated from the GNSS period's
+    fault-free data (nan when the world has no calibration window)."""
 
     epoch_key: jnp.ndarray
     world: WorldState
     quat_est: jnp.ndarray
     pos_est_m: jnp.ndarray
     vel_est_m_s: jnp.ndarray
+    sigma_empirical_m: jnp.ndarray
 
 
-def initial_draw(key, setup: DriveSetup) -> InitialDraw:
+def initial_draw(key, setup: DriveSetup, err: ErrorModel | None = None) -> InitialDraw:
     """Split a run's key into (initial error, initial IMU biases, per-epoch draws), draw the
     initial estimate error ~ N(0, P0) (its clock part is the true receiver clock: the filter
-    starts at 0) and the stationary IMU biases. Shared by ``simulate_drive`` and
+    starts at 0), the stationary IMU biases and the GNSS period of ``err`` (default the
+    realistic world; ``sim.measurement.calibrate``: the SOP errors at t = 0, the receiver's
+    tower-clock fit and its empirical sigma). Shared by ``simulate_drive`` and
     ``sim.recordings.synthesize_recording``, so a synthesized recording is that run."""
+    err = ErrorModel() if err is None else err
     k_init, k_bias, k_scan = jax.random.split(key, 3)
     d0 = jnp.sqrt(jnp.diagonal(setup.P0)) * jax.random.normal(k_init, (_ekf.N_ERR,))
     bg0, ba0 = imu.initial_biases(k_bias, setup.spec)
     q_est0 = _ekf.quat_multiply(_ekf.error_quat(-d0[_ekf.TH]), setup.quat[0])
-    world = WorldState(bg0, ba0, d0[_ekf.CLK], jnp.zeros(setup.towers.shape[0]))
+    n_t = setup.towers.shape[0]
+    world = WorldState(bg0, ba0, d0[_ekf.CLK], jnp.zeros(n_t), jnp.zeros(n_t), jnp.zeros(n_t),
+                       jnp.zeros((n_t, 2)), jnp.zeros((n_t, 2)))
+    world, sig = calibrate(key, world, err, setup.operator, setup.calib_t_s)
     return InitialDraw(k_scan, world, q_est0, setup.pos[0] - d0[_ekf.POS],
-                       setup.vel[0] - d0[_ekf.VEL])
+                       setup.vel[0] - d0[_ekf.VEL], sig)
+
+
+def filter_sigma(d: InitialDraw, err: ErrorModel, filter_sigma_pr_m=0.0):
+    """The pseudorange sigma the receiver's filter uses: ``filter_sigma_pr_m`` when > 0, else
+    the run's empirical estimate from the GNSS period (seed 000 IV-A: "determined
+    empirically"), else, in a world without calibration window (``ErrorModel.clean()``), the
+    truth's ``sigma_pr_m`` (the pre-issue-25 behaviour: the filter is told the truth)."""
+    emp = jnp.where(jnp.isfinite(d.sigma_empirical_m), d.sigma_empirical_m, err.sigma_pr_m)
+    return jnp.where(filter_sigma_pr_m > 0, filter_sigma_pr_m, emp)
 
 
 @partial(jax.jit, static_argnames=("traces", "nees_every"))
-def simulate_drive(key, setup: DriveSetup, sigma_pr_m=2.0, mp_sigma_m=0.0, mp_tau_s=5.0,
-                   fault_tower=0, fault_onset_s=25.0, fault_bias_m=30.0, hal_m=30.0,
-                   dof_offset=0, traces=False, nees_every=10):
-    """One Monte Carlo run of a drive; returns ``DriveSummary`` (and ``DriveTrace`` if
-    ``traces``). vmap over ``key`` for many runs (``monte_carlo_drive``). Every numeric argument
-    is traced (one compilation serves fault-free and faulty runs, both d options); the error
-    arguments are the fields of ``sim.ErrorModel``.
+def simulate_drive(key, setup: DriveSetup, err: ErrorModel | None = None, filter_sigma_pr_m=0.0,
+                   hal_m=30.0, dof_offset=0, traces=False, nees_every=10):
+    """One Monte Carlo run of a drive in the error world ``err`` (default ``ErrorModel()``, the
+    realistic world; ``ErrorModel.clean()`` the white-noise one); returns ``DriveSummary``
+    (and ``DriveTrace`` if ``traces``). vmap over ``key`` for many runs
+    (``monte_carlo_drive``). Every numeric argument and every field of ``err`` is traced (one
+    compilation serves fault-free and faulty runs, both d options, any world). The filter's
+    pseudorange sigma is ``filter_sigma`` (empirical unless ``filter_sigma_pr_m`` > 0).
 
     The run covers the whole epochs of the setup rounded down to a multiple of ``nees_every``;
     NEES (a 17 x 17 Cholesky solve, the costliest single step) is evaluated at the last epoch of
     each block of ``nees_every`` epochs (1 Hz at the default 10 Hz pseudorange rate); every other
     quantity at every epoch."""
-    err = ErrorModel(sigma_pr_m, mp_sigma_m, mp_tau_s, fault_tower, fault_onset_s,
-                     fault_bias_m)
+    err = ErrorModel() if err is None else err
+    fault_tower, fault_onset_s = err.fault_tower, err.fault_onset_s
     sp, p = setup.spec, setup.params
     n_t = setup.towers.shape[0]
-    d = initial_draw(key, setup)
+    d = initial_draw(key, setup, err)
+    sigma_f = filter_sigma(d, err, filter_sigma_pr_m)
     est0 = _ekf.ekf_init(d.quat_est, d.pos_est_m, d.vel_est_m_s, jnp.zeros(3), jnp.zeros(3),
                          jnp.zeros(2), setup.P0)
     carry_f = raim_init(est0, n_t)
@@ -174,13 +207,13 @@ def simulate_drive(key, setup: DriveSetup, sigma_pr_m=2.0, mp_sigma_m=0.0, mp_ta
         e, g_true, a_true, t_e, pos_e, vel_e, q_e, tclk = inp
         world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world, g_true, a_true, t_e,
                                pos_e, setup.towers, tclk, err, sp, p.dt_s, p.s_wdt_s,
-                               p.s_wdtdot_per_s)
+                               p.s_wdtdot_per_s, operator=setup.operator)
         valid = jnp.ones(n_t, bool)
 
         def one_filter(cf, excl):
             prior, phi = _ekf.ekf_predict(cf.state, m.gyro_rad_s, m.accel_m_s2, p)
             cf, out = raim_update(cf, prior, phi, m.pseudorange_m, valid, setup.towers, tclk,
-                                  sigma_pr_m, setup.tables, dof_offset, excl, hal_m)
+                                  sigma_f, setup.tables, dof_offset, excl, hal_m)
             err2d = jnp.linalg.norm(cf.state.r[:2] - pos_e[:2])
             return cf, (err2d, out)
 
@@ -224,6 +257,7 @@ def simulate_drive(key, setup: DriveSetup, sigma_pr_m=2.0, mp_sigma_m=0.0, mp_ta
         hpl_max_m=jnp.max(out.hpl_m, 0),
         n_alarms=jnp.sum(out.alarm, 0),
         n_misleading=jnp.sum(err2d > out.hpl_m, 0),
+        filter_sigma_m=jnp.full(2, sigma_f),
     )
     if traces:
         return summary, DriveTrace(setup.t_s[:n_ep], err2d, nees, out)

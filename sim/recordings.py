@@ -17,42 +17,48 @@ import pandas as pd
 from oaraim.araim.ekf_raim import InitialUncertainty
 from oaraim.constants import C_M_S
 from oaraim.geometry import frames, imu, recording
-from oaraim.sim.drive import DriveSetup, drive_setup, initial_draw
+from oaraim.sim.drive import DriveSetup, drive_setup, filter_sigma, initial_draw
 from oaraim.sim.measurement import ErrorModel, drive_epoch
 from oaraim.sim.trajectory import Scenario
 
 
 @jax.jit
-def _synth(key, setup: DriveSetup, err: ErrorModel):
+def _synth(key, setup: DriveSetup, err: ErrorModel, filter_sigma_pr_m=0.0):
     """The draws of ``simulate_drive`` for ``key`` (``initial_draw``, then ``drive_epoch`` on
     ``fold_in(epoch key, e)``): IMU samples, receiver clock, pseudoranges and their bias per
-    epoch, the initial estimate and the initial receiver clock."""
+    epoch, the initial estimate, the initial receiver clock and the filter's sigma."""
     p = setup.params
-    d = initial_draw(key, setup)
+    d = initial_draw(key, setup, err)
 
     def body(world, inp):
         e, g_true, a_true, t_e, pos_e, tclk = inp
         world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world, g_true, a_true, t_e,
                                pos_e, setup.towers, tclk, err, setup.spec, p.dt_s, p.s_wdt_s,
-                               p.s_wdtdot_per_s, unrolled_imu=True)
+                               p.s_wdtdot_per_s, unrolled_imu=True, operator=setup.operator)
         return world, (m.gyro_rad_s, m.accel_m_s2, m.pseudorange_m, world.rx_clock_m, m.bias_m)
 
     n_ep = setup.t_s.shape[0]
     xs = (jnp.arange(n_ep), setup.gyro, setup.accel, setup.t_s, setup.pos[1:], setup.tower_clk_m)
     _, (gm, am, z, clk, bias) = jax.lax.scan(body, d.world, xs)
-    return gm, am, z, clk, bias, (d.quat_est, d.pos_est_m, d.vel_est_m_s), d.world.rx_clock_m
+    return (gm, am, z, clk, bias, (d.quat_est, d.pos_est_m, d.vel_est_m_s), d.world.rx_clock_m,
+            filter_sigma(d, err, filter_sigma_pr_m))
 
 
-def synthesize_recording(scenario: Scenario, key, *, sigma_pr_m: float | None = None,
+def synthesize_recording(scenario: Scenario, key, *, err: ErrorModel | None = None,
+                         filter_sigma_pr_m: float = 0.0, sigma_pr_m: float | None = None,
                          mp_sigma_m: float | None = None, mp_tau_s: float | None = None,
                          fault_tower: int | None = None, fault_onset_s: float | None = None,
                          fault_bias_m: float | None = None, spec: imu.ImuSpec | None = None,
                          init_uncertainty: InitialUncertainty | None = None,
                          duration_s: float | None = None) -> recording.Recording:
-    """One run of ``scenario`` as a validated ``Recording`` (scenario values where an argument
-    is None). The draws are those of ``sim.simulate_drive(key, ...)``: the same IMU
-    samples, clock, multipath, pseudoranges and initial estimate error, so replaying the
-    recording reproduces that run (up to the ENU -> ECEF -> ENU round trip, ~1e-9 m).
+    """One run of ``scenario`` in the error world ``err`` as a validated ``Recording``. ``err``
+    None: the realistic ``ErrorModel()`` with the scenario's fault; the keyword arguments
+    ``sigma_pr_m`` ... ``fault_bias_m``, where given, replace those fields. The draws are those
+    of ``sim.simulate_drive(key, setup, err, filter_sigma_pr_m)``: the same IMU samples, clock,
+    SOP errors, pseudoranges and initial estimate error, and the pseudoranges' ``sigma_m`` is
+    the filter's sigma of that run (``sim.drive.filter_sigma``: the empirical one unless
+    ``filter_sigma_pr_m`` > 0), so replaying the recording reproduces that run (up to the
+    ENU -> ECEF -> ENU round trip, ~1e-9 m).
 
     Tables: imu (100 Hz, stamps at the end of each interval-mean sample), transmitters (ECEF,
     clock polynomials c dt = bias + drift t), pseudoranges (10 Hz, ``sigma_m``), truth at t = 0
@@ -61,15 +67,16 @@ def synthesize_recording(scenario: Scenario, key, *, sigma_pr_m: float | None = 
     period leaves), ``imu_spec`` and every scenario and draw parameter under ``source``."""
     sc = scenario
     spec = imu.vn100() if spec is None else spec
-    arg = lambda v, d: d if v is None else v  # noqa: E731
-    kw = dict(sigma_pr_m=float(arg(sigma_pr_m, sc.sigma_pr_m)),
-              mp_sigma_m=float(arg(mp_sigma_m, sc.mp_sigma_m)),
-              mp_tau_s=float(arg(mp_tau_s, sc.mp_tau_s)),
-              fault_tower=int(arg(fault_tower, sc.fault_tower)),
-              fault_onset_s=float(arg(fault_onset_s, sc.fault_onset_s)),
-              fault_bias_m=float(arg(fault_bias_m, sc.fault_bias_m)))
+    if err is None:
+        err = ErrorModel(fault_tower=sc.fault_tower, fault_onset_s=sc.fault_onset_s,
+                         fault_bias_m=sc.fault_bias_m)
+    given = dict(sigma_pr_m=sigma_pr_m, mp_sigma_m=mp_sigma_m, mp_tau_s=mp_tau_s,
+                 fault_tower=fault_tower, fault_onset_s=fault_onset_s, fault_bias_m=fault_bias_m)
+    err = err._replace(**{k: v for k, v in given.items() if v is not None})
+    kw = {k: (int(v) if k == "fault_tower" else float(v)) for k, v in err._asdict().items()}
     setup = drive_setup(sc, spec, init_uncertainty, duration_s=duration_s)
-    gm, am, z, clk, bias, est, clk0 = jax.device_get(_synth(key, setup, ErrorModel(**kw)))
+    gm, am, z, clk, bias, est, clk0, sig_f = jax.device_get(
+        _synth(key, setup, ErrorModel(**kw), float(filter_sigma_pr_m)))
     e, n = gm.shape[:2]
     dt = float(setup.params.dt_s)
     lat, lon, h = sc.origin_lat_deg, sc.origin_lon_deg, sc.origin_h_m
@@ -93,7 +100,7 @@ def synthesize_recording(scenario: Scenario, key, *, sigma_pr_m: float | None = 
         "clock_drift_mps": c * np.asarray(sc.tower_clk_drift), "clock_t0_s": 0.0})
     pseudoranges = pd.DataFrame({
         "t_s": np.repeat(t_imu[n - 1::n], l), "tx_id": np.tile(ids, e),
-        "pseudorange_m": np.asarray(z).reshape(-1), "sigma_m": kw["sigma_pr_m"],
+        "pseudorange_m": np.asarray(z).reshape(-1), "sigma_m": float(sig_f),
         "injected_bias_m": np.asarray(bias).reshape(-1)})
     g, a = np.asarray(gm).reshape(-1, 3), np.asarray(am).reshape(-1, 3)
     imu_df = pd.DataFrame({"t_s": t_imu, "gyro_x_radps": g[:, 0], "gyro_y_radps": g[:, 1],
@@ -123,6 +130,7 @@ def synthesize_recording(scenario: Scenario, key, *, sigma_pr_m: float | None = 
                    "scenario": sc.name, "key_data": np.asarray(
                        jax.random.key_data(key)).astype(int).tolist(),
                    "parameters": {**kw, "fault_tower_id": ids[kw["fault_tower"]],
+                                  "filter_sigma_pr_m": float(sig_f),
                                   "duration_s": float(t_ep[-1]),
                                   "meas_rate_hz": float(sc.meas_rate_hz)},
                    "notes": {k: str(v) for k, v in sc.notes.items()}},

@@ -178,9 +178,11 @@ class Scenario(NamedTuple):
 
     @property
     def errors(self) -> ErrorModel:
-        """The scenario's pseudorange error parameters as the measurement model takes them."""
-        return ErrorModel(self.sigma_pr_m, self.mp_sigma_m, self.mp_tau_s, self.fault_tower,
-                          self.fault_onset_s, self.fault_bias_m)
+        """The scenario's own (clean, pre-issue-25) error parameters as the measurement model
+        takes them: ``ErrorModel.clean`` with its sigma, multipath and fault. The realistic
+        world is ``ErrorModel(fault_tower=..., ...)`` (docs/error-world.md)."""
+        return ErrorModel.clean(self.sigma_pr_m, self.fault_tower, self.fault_onset_s,
+                                self.fault_bias_m, self.mp_sigma_m, self.mp_tau_s)
 
 
 #: downtown Riverside, California (seed 000 section IV-A), WGS-84, approximate city centre

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry, sim
+from oaraim import geometry, mc, sim
 from oaraim.araim import snapshot
 from oaraim.araim.error_models import gnss_variances
 from oaraim.geometry import epoch_geometry, gpstime
@@ -41,6 +41,7 @@ from oaraim.studies.base import (
     StudyResult,
     count,
     in_range,
+    non_negative,
     parse_recording,
     positive,
     probability,
@@ -53,6 +54,37 @@ PUBLISHED_REDUCTION_PCT = 44.77
 #: epoch rows per replay call: draws are stacked along the epoch axis in fixed blocks
 BLOCK_ROWS = 4096
 DRIVES = {"seed000-drive": "drive_seed000", "seed002-drive": "drive_seed002"}
+
+
+def parse_world(name, v):
+    """Parser of the ``world`` parameter: 'realistic' or 'clean'."""
+    v = str(v).strip().lower()
+    if v not in ("realistic", "clean"):
+        raise ValueError(f"{name} must be 'realistic' or 'clean', got {v!r}")
+    return v
+
+
+def world_noise_fn(geom, params, seed):
+    """A jitted function of draw indices (k,) -> (errors (k, T, L) m, LTE sigma (k,) m) of the
+    realistic world: ``sim.gnss_errors`` on the GPS columns, ``sim.measurement.sop_errors``
+    on the tower columns (GNSS period of 300 s at 1 Hz before t = 0), from the draw's key
+    fold_in(key(seed), i)."""
+    seed_key = jax.random.key(int(seed))
+    t = jnp.asarray(geom.t_s)
+    el = jnp.asarray(geom.el_rad)
+    is_gps = np.asarray(geom.is_gps)
+    n_tw = int((~is_gps).sum())
+    err = sim.ErrorModel(sigma_pr_m=params["sigma_lte_noise_m"], fault_onset_s=np.inf,
+                         fault_bias_m=0.0)
+    t_cal = -jnp.arange(300)[::-1] * 1.0
+
+    def one(i):
+        k = jax.random.fold_in(seed_key, i)
+        g = sim.gnss_errors(k, t, el, params["sigma_ura_gps_m"], sim.GnssErrorModel())
+        lte, sig = sim.measurement.sop_errors(k, err, t, n_tw, t_cal)
+        return jnp.where(jnp.asarray(is_gps), g, jnp.pad(lte, ((0, 0), (is_gps.sum(), 0)))), sig
+
+    return jax.jit(jax.vmap(one))
 
 
 def parse_drive(name, v):
@@ -86,8 +118,18 @@ class Seed001Vehicle(Study):
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 001: ~15 deg)",
                           "deg"),
         "sigma_ura_gps_m": Param(1.0, positive, "GPS sigma_URA of the ADD model", "m"),
-        "sigma_lte_m": Param(2.0, positive, "LTE sigma in R (seed silent)", "m"),
-        "sigma_lte_noise_m": Param(2.0, positive, "LTE noise of the synthesis", "m"),
+        "world": Param("realistic", parse_world, "error world of the synthesis: 'realistic' "
+                       "(sim.GnssErrorModel for GPS, sim.ErrorModel for the towers; "
+                       "docs/error-world.md) or 'clean' (white N(0, C_acc) GPS and "
+                       "sigma_lte_noise_m LTE noise)"),
+        "sigma_lte_m": Param(0.0, non_negative, "LTE sigma in R (seed silent; 0: the realistic "
+                             "world's empirical estimate from the GNSS period, the clean "
+                             "world's sigma_lte_noise_m)", "m"),
+        "sigma_lte_noise_m": Param(sim.ErrorModel().sigma_pr_m, positive,
+                                   "LTE thermal (white) noise of the synthesis", "m"),
+        "inject_lte_bias_m": Param(0.0, in_range(-1e3, 1e3), "an error outside the PL's model "
+                                   "(tests of the MI check): this bias on LTE tower 1 at "
+                                   "every epoch", "m"),
         "p_fa": Param(snapshot.DEFAULT_P_FA, probability, "false-alarm probability (seed silent)"),
         "p_md": Param(snapshot.DEFAULT_P_MD, probability,
                       "missed-detection probability (seed silent)"),
@@ -129,33 +171,48 @@ class Seed001Vehicle(Study):
         n_t, n_l = geom.valid.shape
         n_draws = 1 if recorded else int(realizations)
         vi, va = (np.asarray(a) for a in gnss_variances(geom.el_rad, params["sigma_ura_gps_m"]))
-        sig_model = np.where(geom.is_gps, np.sqrt(vi), params["sigma_lte_m"])
+        realistic = params["world"] == "realistic" and not recorded
+        sig_lte = params["sigma_lte_m"] or params["sigma_lte_noise_m"]
         sig_noise = np.where(geom.is_gps, np.sqrt(va), params["sigma_lte_noise_m"])
-        var_int = np.where(geom.valid, sig_model**2, 1.0)
         per_block = max(1, BLOCK_ROWS // n_t)
         seed_key = jax.random.key(int(seed))
         noise_fn = jax.jit(jax.vmap(lambda i: jax.random.normal(
             jax.random.fold_in(seed_key, i), (n_t, n_l))))
+        world_fn = world_noise_fn(geom, params, seed) if realistic else None
         out = {k: np.zeros((2, n_draws)) for k in ("mean_hpl", "mean_hpe", "max_hpl", "max_hpe",
-                                                   "alarms", "finite")}
+                                                   "alarms", "finite", "mi", "mi_undetected",
+                                                   "sigma_lte")}
         trace = None
         x0 = np.broadcast_to(geom.origin_ecef_m, (per_block * n_t, 3))
         for start in range(0, n_draws, per_block):
             ids = np.minimum(np.arange(start, start + per_block), n_draws - 1)
             nb = min(per_block, n_draws - start)
+            sl_lte = np.full(ids.size, sig_lte)
             if recorded:
                 pr = pr0[None]
+            elif realistic:
+                e, s_emp = (np.asarray(a) for a in world_fn(jnp.asarray(ids, jnp.uint32)))
+                pr = pr0[None] + np.where(geom.valid, e, 0.0)
+                if not params["sigma_lte_m"]:
+                    sl_lte = s_emp
             else:
                 pr = pr0[None] + np.where(geom.valid, sig_noise, 0.0)[None] * np.asarray(
                     noise_fn(jnp.asarray(ids, jnp.uint32)))
+            tower1 = np.arange(n_l) == np.argmin(geom.is_gps)
+            pr = pr + np.where(geom.valid & tower1, params["inject_lte_bias_m"], 0.0)
+            # the PL's sigmas per draw: ADD C_int for GPS, the LTE sigma (empirical per draw)
+            sig_model = np.where(geom.is_gps[None, None], np.sqrt(vi)[None],
+                                 sl_lte[:, None, None])
+            var_int = np.where(geom.valid[None], sig_model**2, 1.0).reshape(-1, n_l)
+            sig_model = sig_model.reshape(-1, n_l)
             rows = lambda a, k=ids.size: np.broadcast_to(a, (k,) + a.shape).reshape(  # noqa: E731
                 (k * n_t,) + a.shape[1:])
             for ci, sop in enumerate((False, True)):
                 use = geom.valid & (geom.is_gps | sop)[None]
                 r = snapshot.replay(
-                    pr.reshape(-1, n_l), rows(geom.tx_pos_m), rows(var_int), rows(var_int),
+                    pr.reshape(-1, n_l), rows(geom.tx_pos_m), var_int, var_int,
                     rows(use), rows(geom.truth_m), correction_m=rows(corr),
-                    slope_sigma_m=rows(sig_model), x0_m=x0,
+                    slope_sigma_m=sig_model, x0_m=x0,
                     config=snapshot.ReplayConfig(monitors=("slope",), p_fa=params["p_fa"],
                                                  p_md=params["p_md"]))
                 hpl = np.asarray(r.slope.hpl_all_in_view_m).reshape(ids.size, n_t)[:nb]
@@ -170,6 +227,10 @@ class Seed001Vehicle(Study):
                 out["mean_hpe"][ci, sl] = np.mean(hpe, -1)
                 out["max_hpe"][ci, sl] = np.max(hpe, -1)
                 out["alarms"][ci, sl] = det.sum(-1)
+                mi = fin & (hpe > hpl)
+                out["mi"][ci, sl] = mi.sum(-1)
+                out["mi_undetected"][ci, sl] = (mi & ~det).sum(-1)
+                out["sigma_lte"][ci, sl] = sl_lte[:nb]
                 if start == 0:
                     trace = {} if trace is None else trace
                     trace[ci] = (hpl[0], hpe[0])
@@ -206,8 +267,10 @@ class Seed001Vehicle(Study):
                    "mean_hpl_gps_m": m_g, "mean_hpl_sop_m": m_s, "reduction_pct": red})
         note = (f"slope HPL, P_FA={params['p_fa']:g}, P_MD={params['p_md']:g}; GPS sigma "
                 f"sqrt(C_int(el)) (URA {params['sigma_ura_gps_m']:g} m), LTE "
-                f"{params['sigma_lte_m']:g} m; {params['drive']}, {geom.t_s.size} epochs x "
-                f"{n_draws} draws; sky: {desc}; synthetic, not tuned")
+                f"{np.median(out['sigma_lte'][1]):.2f} m; {params['drive']}, "
+                f"{geom.t_s.size} epochs x "
+                f"{n_draws} draws; sky: {desc}; synthetic ({params['world']} error world), "
+                "not tuned")
         rows = [
             {"quantity": "mean GPS-only HPL over the drive", "unit": "m",
              "published": PUBLISHED_HPL_GPS_M, "reproduced": m_g, "note": note},
@@ -237,6 +300,17 @@ class Seed001Vehicle(Study):
             "false_alarm_rate_gps": float(np.sum(out["alarms"][0]) / (n_ep * n_draws)),
             "false_alarm_rate_sop": float(np.sum(out["alarms"][1]) / (n_ep * n_draws)),
             "ratio_sop_over_gps": m_s / m_g if m_g > 0 else float("nan"),
+            "world": params["world"],
+            "sigma_lte_in_pl_m_median": float(np.median(out["sigma_lte"][1])),
+            # MI = HPE > HPL (finite HPL); draws are independent: the run share's
+            # Clopper-Pearson interval is exact, the epoch one assumes independent epochs
+            "misleading_information": {cfg: {
+                "draws_with_any": mc.rate_with_interval(np.sum(out["mi"][ci] > 0), n_draws),
+                "epochs": mc.rate_with_interval(np.sum(out["mi"][ci]), n_ep * n_draws),
+                "epochs_without_alarm": mc.rate_with_interval(np.sum(out["mi_undetected"][ci]),
+                                                              n_ep * n_draws),
+                "note": "epoch intervals assume independent epochs (they are not)"}
+                for ci, cfg in enumerate(("gps", "sop"))},
         }
         return StudyResult(ds, rows, metrics, extra_provenance={
             "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris),

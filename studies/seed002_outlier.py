@@ -6,7 +6,8 @@ a user's drive; a Monte Carlo of ``--realizations`` runs), on ``sim.drive_seed00
 1.4 km downtown Riverside drive, 5 LTE towers (the seed's "5 LTE base stations"), NIS with
 d = N_s (seed 002 section 3), an outlier of +30 m on tower 1 from t = 95 s (the seed's detection
 time: its Fig. 3 threshold is exceeded at t = 95 s; the seed names neither tower nor magnitude,
-we keep seed 000's tower 1 and our 30 m NLOS choice). Published: 2D RMSE 8.2 -> 4.8 m (42 %),
+we keep seed 000's tower 1 and our 30 m NLOS choice), in the same error world
+(``sim.ErrorModel()``, docs/error-world.md). Published: 2D RMSE 8.2 -> 4.8 m (42 %),
 maximum 2D error 20.4 -> 11.6 m (43.3 %).
 """
 
@@ -21,8 +22,8 @@ class Seed002Outlier(EkfDriveStudy):
     name = "seed002-outlier"
     title = "Seed 002 outlier exclusion, 1.4 km drive"
     seed_file = "002_435c1f190440c5ec.txt"
-    realization = ("one Monte Carlo run of the whole synthesized 1.4 km drive (IMU, clock, "
-                   "pseudorange noise, initial error; both filters)")
+    realization = ("one Monte Carlo run of the whole synthesized 1.4 km drive (GNSS period, "
+                   "IMU, clock, SOP error world, initial error; both filters)")
     default_realizations = 200
     quick_realizations = 20
     scenario_fn = staticmethod(sim.drive_seed002)

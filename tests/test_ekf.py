@@ -274,8 +274,11 @@ DURATION_S = 30.0
 def drive():
     setup = sim.drive_setup(sim.drive_seed000(), duration_s=DURATION_S)
     keys = jax.random.split(jax.random.key(2024), N_RUNS)
+    # the clean world (white 2 m noise, the filter told the truth's sigma): the consistency
+    # checks below hold only there; the realistic world is tests/test_world.py's
     run = jax.jit(jax.vmap(lambda k, b, off: sim.simulate_drive(
-        k, setup, fault_bias_m=b, fault_onset_s=25.0, dof_offset=off, traces=True),
+        k, setup, sim.ErrorModel.clean(fault_bias_m=b, fault_onset_s=25.0), dof_offset=off,
+        traces=True),
         in_axes=(0, None, None)))
     return setup, keys, run
 

@@ -15,31 +15,45 @@ from oaraim.registry import STUDIES
 DUR_S = 30.0  # the first 30 s of the seed 000 drive: fault on tower 1 from 25 s
 
 
-@pytest.fixture(scope="module")
-def drive(tmp_path_factory):
-    """Run 0 of seed 0: synthesized, written (Parquet), loaded, replayed; and the direct run."""
+def _drive(tmp_path_factory, err):
     sc = sim.drive_seed000()
     key = mc.realization_keys(0, 0, 0, 1)[0]
-    rec = sim.synthesize_recording(sc, key, duration_s=DUR_S)
+    rec = sim.synthesize_recording(sc, key, err=err, duration_s=DUR_S)
     folder = tmp_path_factory.mktemp("drive") / "drive"
     geometry.write_recording(folder, rec)
     loaded = geometry.load_recording(folder)
     tr = ekf_replay.replay_ekf_raim(loaded)
     setup = sim.drive_setup(sc, duration_s=DUR_S)
-    summ, direct = sim.simulate_drive(key, setup, sigma_pr_m=2.0, fault_tower=0,
-                                      fault_onset_s=25.0, fault_bias_m=30.0, traces=True)
+    summ, direct = sim.simulate_drive(key, setup, err, traces=True)
     return sc, rec, folder, loaded, tr, jax.device_get(direct)
 
 
-def test_recording_round_trip_replays_the_direct_simulation(drive):
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    """Run 0 of seed 0 in the clean world (white 2 m noise, the filter told the truth: the exact
+    detection / exclusion expectations below hold only there): synthesized, written (Parquet),
+    loaded, replayed; and the direct run."""
+    return _drive(tmp_path_factory, sim.ErrorModel.clean())
+
+
+@pytest.fixture(scope="module")
+def world_drive(tmp_path_factory):
+    """The same run in the default (realistic) error world."""
+    return _drive(tmp_path_factory, sim.ErrorModel())
+
+
+@pytest.mark.parametrize("which", ["drive", "world_drive"])
+def test_recording_round_trip_replays_the_direct_simulation(which, request):
     """The synthesized recording, written and loaded back, replays to the run that
     ``simulate_drive`` computes from the same key: same detections and exclusions, NIS and 2D
     errors equal to 1e-6. Not bit-identical because the recording stores ECEF (towers, truth)
     and the replay converts back to ENU (~1e-9 m of rounding), and the epoch grid is rebuilt
     from the stored time stamps. NB: this relies on ``synthesize_recording`` drawing the same
     normals as ``simulate_drive`` (key split in 3, fold_in per epoch, one normal vector per
-    epoch in the order IMU, clock, multipath, pseudorange); change both together."""
-    _, _, _, _, tr, direct = drive
+    epoch in the order IMU, clock, multipath, pseudorange, and the GNSS period and named
+    streams of the error world); change both together. Both worlds: the realistic one's
+    pseudoranges carry the run's empirical sigma, which the replay reads from the table."""
+    _, rec, _, _, tr, direct = request.getfixturevalue(which)
     n = direct.t_s.shape[0]
     assert n == 300 and tr.t_s.shape == (300,)
     np.testing.assert_allclose(tr.t_s, np.asarray(direct.t_s), atol=1e-9)
@@ -48,6 +62,8 @@ def test_recording_round_trip_replays_the_direct_simulation(drive):
     np.testing.assert_allclose(tr.nis, np.asarray(direct.raim.nis).T, rtol=1e-7, atol=1e-6)
     np.testing.assert_allclose(tr.err_2d_m, np.asarray(direct.err_2d_m).T, atol=1e-6)
     np.testing.assert_allclose(tr.hpl_m, np.asarray(direct.raim.hpl_m).T, rtol=1e-7)
+    assert rec.pseudoranges["sigma_m"].iloc[0] == rec.meta["source"]["parameters"][
+        "filter_sigma_pr_m"]
 
 
 def test_in_memory_and_loaded_recordings_replay_identically(drive):
@@ -112,14 +128,21 @@ def test_missing_epochs_become_prediction_only(drive):
     np.testing.assert_array_equal(tr_g.err_2d_m[:, :100], tr.err_2d_m[:, :100])
 
 
-def test_study_defaults_are_the_scenario_values():
+def test_study_defaults_are_the_realistic_world_and_the_scenario_fault():
+    """Issue 25: the studies' default world is ``sim.ErrorModel()`` (the realistic one); the
+    fault is the scenario's."""
+    from oaraim.studies.common.ekf_drive import world_of
     for name, sc in (("seed000-ekf-raim", sim.drive_seed000()),
                      ("seed002-outlier", sim.drive_seed002())):
         p = STUDIES[name].validate({})
-        assert p["sigma_pr_m"] == sc.sigma_pr_m and p["fault_bias_m"] == sc.fault_bias_m
-        assert p["fault_tower"] == sc.fault_tower + 1 and p["fault_onset_s"] == sc.fault_onset_s
-        assert p["mp_sigma_m"] == sc.mp_sigma_m and p["mp_tau_s"] == sc.mp_tau_s
+        assert p["world"] == "realistic" and p["filter_sigma_pr_m"] == 0.0
+        assert world_of(p) == sim.ErrorModel(fault_tower=sc.fault_tower,
+                                             fault_onset_s=sc.fault_onset_s,
+                                             fault_bias_m=sc.fault_bias_m)
+        assert p["fault_tower"] == sc.fault_tower + 1
         assert sc.towers_enu_m.shape[0] == 5
+        clean = world_of(STUDIES[name].validate({"world": "clean"}))
+        assert clean.calib_window_s == 0.0 and clean.nlos_rate_per_s == 0.0
 
 
 def test_bad_recording_folder_is_a_clear_error(tmp_path):

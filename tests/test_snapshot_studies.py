@@ -85,3 +85,22 @@ def test_recording_round_trip_replays_identically(tmp_path, shared_data):
                                   "recording": str(folder)}), 40, 0, None)
     np.testing.assert_allclose(b.dataset["hpl_m"].values, a.dataset["hpl_m"].values, rtol=1e-9)
     np.testing.assert_allclose(b.dataset["hpe_m"].values, a.dataset["hpe_m"].values, atol=1e-6)
+
+
+def test_vehicle_mi_check_can_fail(shared_data):
+    """Issue 25 item 6: in the clean world (truth drawn from the PL's own model, LTE 2 m) HPE >
+    HPL is rare; an error outside that model makes it common: a constant 40 m bias (20 sigma)
+    on LTE tower 1, beyond the bias the slope HPL covers with P_MD (smaller ones, 12 m, still
+    stay under it on this drive: the GPS satellites dominate). The MI rates come with
+    Clopper-Pearson intervals."""
+    study = STUDIES["seed001-vehicle"]
+    base = {"duration_s": "5", "world": "clean", "sigma_lte_noise_m": "2", "sigma_lte_m": "2"}
+
+    def mi(**kw):
+        r = study.run(study.validate({**base, **kw}), 4, 0, None)
+        return r.metrics["misleading_information"]["sop"]
+
+    clean, bad = mi(), mi(inject_lte_bias_m="40")
+    assert bad["epochs"]["count"] > 10 * max(clean["epochs"]["count"], 1)
+    assert bad["draws_with_any"]["ci_low"] > clean["draws_with_any"]["rate"]
+    assert bad["epochs"]["ci_low"] < bad["epochs"]["rate"] < bad["epochs"]["ci_high"]

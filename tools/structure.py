@@ -50,7 +50,7 @@ LAYERS = {
     "geometry": {"constants"},
     "araim": {"geometry", "constants", "config"},
     "mc": {"config"},
-    "sim": {"araim", "geometry", "constants"},
+    "sim": {"araim", "geometry", "constants", "mc"},  # mc: the named key streams (issue 25)
     "data": {"geometry"},                       # oaraim.data: the real files, checked
     "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config"},
     "app": {"studies", "araim", "geometry", "mc", "sim", "data", "constants", "config",
