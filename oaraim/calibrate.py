@@ -23,6 +23,8 @@ SENSITIVITY_STEP = 0.05
 X_TOL = 1e-3
 #: tolerance of the sum of squared relative residuals (residuals of ~3e-4)
 F_TOL = 1e-7
+#: Nelder-Mead's first simplex: this share of each parameter's range from the start
+SIMPLEX_STEP = 0.1
 
 
 class CalibrationResult(NamedTuple):
@@ -118,9 +120,17 @@ def calibrate(study, *, realizations=None, seed=0, sets=None,
         from scipy.optimize import minimize
 
         span = highs - lows
-        r = minimize(lambda u: cost(lows + span * u), (x0 - lows) / span, method="Nelder-Mead",
+        u0 = (x0 - lows) / span
+        # a simplex of SIMPLEX_STEP of each range (scipy's default, 5 % of the start's own
+        # coordinates, crawls when a default sits near the low end of its range)
+        simplex = [u0] + [np.where(np.arange(len(names)) == i,
+                                   u0 + (SIMPLEX_STEP if u0[i] + SIMPLEX_STEP <= 1.0
+                                         else -SIMPLEX_STEP), u0)
+                          for i in range(len(names))]
+        r = minimize(lambda u: cost(lows + span * u), u0, method="Nelder-Mead",
                      bounds=[(0.0, 1.0)] * len(names),
-                     options={"xatol": X_TOL, "fatol": F_TOL, "maxfev": 80 * len(names)})
+                     options={"xatol": X_TOL, "fatol": F_TOL, "maxfev": 80 * len(names),
+                              "initial_simplex": np.array(simplex)})
         x = lows + span * np.clip(r.x, 0.0, 1.0)
     v_fit, pub, quantities = values(x)
     v_def, _, _ = values([float(study.params[k].default) for k in names])

@@ -151,7 +151,7 @@ class SopRequirements(Study):
     title = "SOP requirements: the largest sigma_URA^S that still lowers the HPL, by Newton"
     seed_file = "004_55e51818ceb3e5a9.txt"
     realization = "one GPS epoch and one BPP draw of the towers (Fig. 4's draws)"
-    default_realizations = 2048
+    default_realizations = 1024
     quick_realizations = 512
     max_realizations = 20_000
     #: --quick: 2 SOPs at two P_s^S of one fault-mode order (one compiled program), the grid
@@ -163,7 +163,7 @@ class SopRequirements(Study):
     params = {
         "n_sops": Param((2, 3, 4, 5, 6, 8), axis(count(1, 16)), "SOP counts (Fig. 4's panels)"),
         "p_s_sop": Param(c.P_S_GRID, axis(probability), "P_s^S values (Fig. 4's 13)"),
-        "check_p_s": Param((1e-6, 1e-4, 1e-3), axis(probability),
+        "check_p_s": Param((1e-6, 1e-4), axis(probability),
                            "P_s^S values where Fig. 4's grid boundary is computed too"),
         "map_n_sops": Param((2, 8), axis(count(1, 16)), "panels of the sensitivity maps"),
         "map_sigma_ura_sop_m": Param((0.5, 1.0, 2.0, 5.0, 10.0, 15.0, 20.0, 25.0),
