@@ -229,8 +229,9 @@ class Seed004Uav(Study):
         b_nom = np.where(geom.is_gps, params["b_nom_m"], 0.0)
         is_tw = ~geom.is_gps
         tw_idx = np.flatnonzero(is_tw)
-        # SOP numbering: by clock group (carrier A first), then tower order; for a synthesized
-        # flight this is sop_order(); a recording is numbered the same way by its groups
+        # SOP numbering: by clock group (operator, in order of first appearance), then tower
+        # order; for a synthesized flight this is the table's (towers.py); a recording is
+        # numbered the same way by its groups
         order = np.argsort(cons[tw_idx], kind="stable")
         n_sop_max = tw_idx.size
         configs = list(range(n_sop_max + 1))
