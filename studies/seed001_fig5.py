@@ -360,7 +360,10 @@ class Fig5Madrid24h(Study):
                                             or "none")},
             {"quantity": "Fig. 5(b): largest finite GPS-only HPL of the day (an instance > 80 m)",
              "unit": "m", "published": PUBLISHED_INSTANCE_HPL_M, "reproduced": inst_hpl,
-             "note": f"published: > {PUBLISHED_INSTANCE_HPL_M:g} m; epoch {e_inst} ("
+             "note": ("" if inst_hpl > PUBLISHED_INSTANCE_HPL_M else
+                      f"our day never exceeds {PUBLISHED_INSTANCE_HPL_M:g} m: the maximum is "
+                      "drawn; ")
+                     + f"published: > {PUBLISHED_INSTANCE_HPL_M:g} m; epoch {e_inst} ("
                      f"{hours[e_inst]:.2f} h), {int(n_vis[e_inst])} GPS in view, GPS + SOPs "
                      f"{sop_mean[e_inst]:.1f} m (mean of the draws)"},
         ]
@@ -378,6 +381,11 @@ class Fig5Madrid24h(Study):
             "sigma_matching_published_gps_mean_m": k * params["sigma_gps_m"],
             "mean_hpl_sop_at_that_sigma_m": mean_sop * k,
             "episodes_gps_at_that_sigma": len(eps_k),
+            # Fig. 5(b): the instance drawn, and whether our day reaches the paper's '> 80 m'
+            # (if not, the instance is the day's maximum all the same, and this says so)
+            "instance_epoch": e_inst, "instance_hours": float(hours[e_inst]),
+            "instance_hpl_gps_m": inst_hpl,
+            "instance_exceeds_published_hpl": bool(inst_hpl > PUBLISHED_INSTANCE_HPL_M),
         }
         return StudyResult(ds, rows, metrics, extra_provenance={"sky_source": sky_desc,
                                                                 "real_ephemeris": bool(real)})

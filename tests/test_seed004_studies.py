@@ -156,3 +156,55 @@ def test_keys_do_not_depend_on_axis_values_for_common_random_numbers():
     b = cell_key_id({"n_sops": 8, "p_s_sop": 1e-1, "sigma_ura_sop_m": 25.0}, study.key_axes)
     assert a == b
     jax.block_until_ready(mc.realization_keys(0, a, 0, 4))
+
+
+# ------------------------------------------------------------------ seed004-uav (issue 25 item 3)
+def test_uav_tower_table_is_the_papers_carriers_by_operator():
+    """Seed 004 VII-A: 11 towers on 739, 1955 (AT&T), 2125 (T-Mobile), 2145 MHz (Verizon);
+    numbered operator by operator so that SOPs 1 and 2 share a clock (Fig. 8)."""
+    from oaraim.studies import seed004_uav as u
+    assert [t.sop for t in u.TOWERS] == list(range(1, 12))
+    assert {t.carrier_mhz for t in u.TOWERS} == set(u.CARRIERS_MHZ)
+    op = {739: "AT&T", 1955: "AT&T", 2125: "T-Mobile", 2145: "Verizon"}
+    assert all(op[t.carrier_mhz] == t.operator for t in u.TOWERS)
+    ops = u.tower_operators()
+    assert ops == sorted(ops, key=u.OPERATORS.index)  # operator blocks in SOP order
+    assert ops[0] == ops[1] != ops[5]
+    d = np.linalg.norm(u.towers_enu_m()[:, :2], axis=1)
+    assert np.all((d > 500.0) & (d < 3000.0))  # the docstring's 0.6-2.9 km
+
+
+@pytest.fixture(scope="module")
+def uav_runs(shared_data):
+    """The first 160 epochs, clean and with an unmodelled 120 m bias on SOP 2."""
+    study = STUDIES["seed004-uav"]
+    base = {"n_epochs": "2880", "exclusion": "false", "fault_onset_s": "4",
+            "fault_ramp_mps": "2"}
+    return [study.run(study.validate({**base, **kw}), 160, 0, None)
+            for kw in ({}, {"inject_sop_bias_m": "120", "inject_sop": "2"})]
+
+
+def test_uav_constellations_by_operator_and_prn8(uav_runs):
+    """The clock groups are the operators; PRN 8 (Fig. 7) is in view at the default take-off."""
+    m = uav_runs[0].metrics
+    assert m["carriers"] == ["AT&T", "T-Mobile", "Verizon"]
+    assert m["fault_prn"] == 8
+    assert m["gps_visible_min"] >= 5
+
+
+def test_uav_mi_check_can_fail(uav_runs):
+    """Issue 25 item 6 on the UAV: with the PL's own noise model no epoch of GPS + 11 SOPs has
+    HPE > HPL (MHSS all-in-view bounds a single SOP fault at P_s^S = 1e-4: 15 and 60 m on SOP 2
+    still stay under it, HPE/HPL <= 0.76); a 120 m bias (40 sigma_URA^S) on SOP 2 is beyond
+    what the PL covers without detection, and MI becomes common, with Clopper-Pearson intervals
+    that do not overlap (160 independent epochs each). GPS only does not use the tower: its
+    HPL and HPE are the same numbers."""
+    clean, bad = (r.metrics["misleading_information_rate"]["11"] for r in uav_runs)
+    assert clean["count"] == 0 and clean["trials"] == 160
+    assert bad["count"] > 40
+    assert bad["ci_low"] > clean["ci_high"]
+    assert bad["ci_low"] < bad["rate"] < bad["ci_high"]
+    a, b = (r.dataset for r in uav_runs)
+    np.testing.assert_array_equal(a["hpl_m"].values[0], b["hpl_m"].values[0])
+    np.testing.assert_array_equal(a["hpe_m"].values[0], b["hpe_m"].values[0])
+    assert b["mi_count"].values[-1] == bad["count"]

@@ -1,53 +1,11 @@
-"""Seed 004 section VII: the UAV flight with GPS + up to 11 LTE towers, snapshot OARAIM per
-epoch (Figs. 6-9).
-
-Setup:
-  * Flight: ``sim.uav_seed004()`` (815 m in 220 s, 11 towers, origin downtown Riverside,
-    CA); the seed gives 2880 epochs and 220 s but no rate: we take 2880 epochs spread uniformly
-    over the flight (t_k = k 220 / 2880 s, 13.09 Hz). One realization = one epoch;
-    ``--realizations N`` replays the first N of the ``n_epochs`` epochs.
-  * GPS sky: broadcast ephemeris ``nav/brdc0010.22n`` (2022-01-01; the seed does not date the
-    flight; ``oaraim.data``, fetched if missing) at ``start_h`` = 18.0 h GPS time (10:00 local,
-    a daylight flight; chosen before any result), or the nominal 24-slot constellation on
-    ``--set nav=nominal`` (provenance says which). Mask 15 deg (seed 004 VII-B).
-  * Towers in three SOP constellations (DESIGN.md: three carriers): azimuth-sorted tower j
-    belongs to carrier j mod 3 (A: 4 towers, B: 4, C: 3, interleaved in azimuth). SOPs are
-    numbered carrier A first, then B, then C, and are added in that order (seed 004 VII-D:
-    "the order of adding SOPs followed the numbering"): +1 = one SOP of carrier A (a new
-    constellation with one SOP: Theorem 2), +2 and +4 = carrier A, +8 = A and B, +11 = all.
-  * Measurements: ``sim.gnss`` (module docstring); noise GPS N(0, C_acc) (ADD
-    accuracy model, sigma_URE = 2/3 sigma_URA), LTE N(0, ``sigma_lte_noise_m``^2) with 2 m
-    (the scenario's "meter-level" LTE ranging); the noise of epoch k is drawn from
-    fold_in(key(seed), k), so an epoch's result does not depend on N. ``--set recording=PATH``
-    replays a recorded flight (``geometry.recording`` format with gnss, pseudoranges, truth)
-    through the same path instead.
-  * Integrity: Table I (``araim.BUDGET_SEED004_TABLE_I`` by its symbols), P_s^S = 1e-4 and
-    sigma_URA^S = 3 m (seed 004 VII-A and VII-D), P_const^S = 1e-4, SOP b_nom = 0, SOP user
-    term 0, GPS user term the ADD dual-frequency airborne model (DESIGN.md "silent").
-  * Per configuration (GPS + first n SOPs, n = 0..11): WNLS (C_int weights, one clock per
-    group) and MHSS all-in-view HPL (``araim.protection_levels``; each configuration's fault-
-    mode order is the smallest meeting P_thresh over its epochs). GPS + all SOPs also through
-    ``araim.snapshot.replay`` with ``detect_and_exclude`` (Fig. 6: HPE and HPL of the solution
-    kept).
-  * Fig. 7 (Theorem 1): a bias ramp ``fault_ramp_mps`` from ``fault_onset_s`` on one GPS
-    satellite (PRN 8 as in the seed if it is in view the whole flight, else the lowest PRN that
-    is); the solution-separation statistic |dx_q| and threshold T_q of that satellite's fault
-    mode, GPS only vs GPS + SOP 1, and the detection times (first epoch after the onset with a
-    test coefficient tau > 1, any mode). The noise makes those times coincide at the epoch
-    spacing (76 ms), so the sensitivity loss is also given without noise: the minimum
-    detectable bias on that satellite per epoch (min over monitored modes and axes of
-    T_i,q / |separation per metre of bias|, from a unit residual on the satellite alone; the
-    separations are linear in the residual) and the time at which the ramp reaches it,
-    interpolated between epochs. Theorem 1 makes it larger with one SOP by the K_fa ratio.
-"""
-
+"""The seed004-uav study itself (the package docstring describes it)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, sim
+from oaraim import araim, mc, sim
 from oaraim.araim import snapshot
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
@@ -75,13 +33,11 @@ from oaraim.studies.common.seed004 import (
     P_SAT_GPS,
     resolve_sky,
 )
+from oaraim.studies.seed004_uav.plots import plot_uav
+from oaraim.studies.seed004_uav.towers import tower_operators, towers_enu_m
 
 PUBLISHED_EPOCHS = 2880
 FLIGHT_S = 220.0
-#: seed 004 VII: carriers of the 11 towers (names only: which tower is whose is not published)
-CARRIERS = ("A", "B", "C")
-#: Stanford-diagram configurations of Fig. 9
-STANFORD_SOPS = (0, 1, 2, 4, 8)
 #: epochs per MHSS kernel call (fixed: results do not depend on N or the chunk)
 BLOCK = 480
 BLOCK_FDE = 96
@@ -115,22 +71,15 @@ def parse_bool(name, v):
     raise ValueError(f"{name} must be true or false, got {v!r}")
 
 
-def sop_order(n_towers):
-    """Tower indices (azimuth order of the scenario) in SOP numbering: carrier A's towers
-    first, then B, then C; and each tower's carrier (tower j -> carrier j mod 3)."""
-    carrier = [CARRIERS[j % 3] for j in range(n_towers)]
-    order = [j for c in CARRIERS for j in range(n_towers) if carrier[j] == c]
-    return np.asarray(order), carrier
-
-
 def synthesize(params, seed, scenario=None):
     """(EpochGeometry, pseudorange_m, correction_m, description) for the study's inputs."""
     if params["recording"] != NO_RECORDING:
         m = epoch_geometry.from_recording(load_recording(params["recording"]), params["mask_deg"])
         return m.geom, m.pseudorange_m, m.correction_m, f"recording {params['recording']}"
-    scenario = scenario or sim.uav_seed004()
-    n_tw = int(scenario.towers_enu_m.shape[0])
-    _, carrier = sop_order(n_tw)
+    # the flight of sim.uav_seed004 with the study's tower table (towers.py), in SOP order,
+    # one clock group per operator
+    scenario = scenario or sim.uav_seed004()._replace(towers_enu_m=towers_enu_m())
+    carrier = tower_operators()
     source, desc, real = resolve_sky(params["nav"])
     if real:
         from oaraim.studies.common.seed004 import day_start
@@ -144,6 +93,22 @@ def synthesize(params, seed, scenario=None):
     noise = draw_noise(geom, seed, params["sigma_ura_gps_m"], params["sigma_lte_noise_m"])
     pr = sim.pseudoranges(geom, noise)
     return geom, pr, np.where(geom.valid, geom.tx_clock_m, 0.0), desc
+
+
+def inject_bias(geom, pr, params):
+    """pr with ``inject_sop_bias_m`` added to SOP ``inject_sop`` (1-based, SOP order) at
+    every epoch: an error outside the PL's model, for the MI check (issue 25 item 6)."""
+    if params["inject_sop_bias_m"] == 0.0:
+        return pr
+    tw = np.flatnonzero(~geom.is_gps)
+    tw = tw[np.argsort(labels(geom)[0][tw], kind="stable")]  # SOP numbering, as run() does
+    if not 1 <= params["inject_sop"] <= tw.size:
+        raise ValueError(f"inject_sop must be an SOP number 1..{tw.size}, got "
+                         f"{params['inject_sop']!r}")
+    out = np.array(pr, copy=True)
+    j = tw[params["inject_sop"] - 1]
+    out[:, j] = np.where(geom.valid[:, j], out[:, j] + params["inject_sop_bias_m"], out[:, j])
+    return out
 
 
 def draw_noise(geom, seed, sigma_ura_gps_m, sigma_lte_m):
@@ -207,8 +172,9 @@ class Seed004Uav(Study):
     nav_file = NAV_FILE
     params = {
         "nav": NAV,
-        "start_h": Param(18.0, in_range(0.0, 23.9), "GPS time of the take-off, hours of the "
-                         "file's day (our choice: 10:00 local)", "h"),
+        "start_h": Param(20.5, in_range(0.0, 23.9), "GPS time of the take-off, hours of the "
+                         "file's day (our choice: 12:30 local, the first daylight half hour "
+                         "with PRN 8 above 15 deg all flight, seed 004 Fig. 7)", "h"),
         "n_epochs": Param(PUBLISHED_EPOCHS, count(10, 100000),
                           "epochs over the 220 s flight (seed 004: 2880)"),
         "mask_deg": Param(15.0, in_range(0.0, 89.0), "GPS elevation mask (seed 004 VII-B)",
@@ -228,6 +194,11 @@ class Seed004Uav(Study):
         "fault_ramp_mps": Param(0.5, positive, "slope of the Fig. 7 bias ramp", "m/s"),
         "fault_modes": fault_modes_param("grouped", "seed 004's rule (eq. 8), as the other seed "
                                          "004 studies; P_s^S = 1e-4 (VII)"),
+        "inject_sop_bias_m": Param(0.0, in_range(-1e4, 1e4), "constant bias added to SOP "
+                                   "inject_sop's pseudoranges, outside the PL's model (MI "
+                                   "check, issue 25 item 6; 0 = off)", "m"),
+        "inject_sop": Param(1, count(1, 11), "SOP number (towers.py) that inject_sop_bias_m "
+                            "biases"),
         "exclusion": Param(True, parse_bool, "GPS + all SOPs also with detect_and_exclude "
                            "(~2 min per 2880 epochs on 2 CPU cores)"),
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagrams "
@@ -243,6 +214,7 @@ class Seed004Uav(Study):
         all SOPs with exclusion (Fig. 6), the Fig. 7 ramp and the detectable bias."""
         self.fault_modes = params["fault_modes"]
         geom, pr, corr, desc = synthesize(params, seed)
+        pr = inject_bias(geom, pr, params)
         n_t = min(int(realizations), geom.t_s.size)
         sl = slice(0, n_t)
         geom = geom._replace(**{k: getattr(geom, k)[sl] for k in (
@@ -257,8 +229,9 @@ class Seed004Uav(Study):
         b_nom = np.where(geom.is_gps, params["b_nom_m"], 0.0)
         is_tw = ~geom.is_gps
         tw_idx = np.flatnonzero(is_tw)
-        # SOP numbering: by clock group (carrier A first), then tower order; for a synthesized
-        # flight this is sop_order(); a recording is numbered the same way by its groups
+        # SOP numbering: by clock group (operator, in order of first appearance), then tower
+        # order; for a synthesized flight this is the table's (towers.py); a recording is
+        # numbered the same way by its groups
         order = np.argsort(cons[tw_idx], kind="stable")
         n_sop_max = tw_idx.size
         configs = list(range(n_sop_max + 1))
@@ -439,6 +412,14 @@ class Seed004Uav(Study):
         n_all = configs[-1]
         mi = {n: int(np.sum(np.isfinite(hpl[i]) & (hpe[i] > hpl[i]))) for i, n in
               enumerate(configs)}
+        # MI rate with its Clopper-Pearson interval: epochs with a finite HPL are the trials;
+        # the synthesized noise is drawn independently per epoch, so given the flight's
+        # geometry the trials are independent (a recording's epochs need not be)
+        n_fin = {n: int(np.sum(np.isfinite(hpl[i]))) for i, n in enumerate(configs)}
+        mi_rate = {n: mc.rate_with_interval(mi[n], n_fin[n]) for n in configs}
+        reduced = {n: float(np.mean((hpl[i] < hpl[0])[fin])) if fin.any() else float("nan")
+                   for i, n in enumerate(configs)}
+        n_red = [n for n in configs if 2 <= n <= 8]
         hal = params["hal_m"]
         normal_all = float(np.mean((hpe[-1] <= hpl[-1]) & (hpl[-1] <= hal)))
         f_gps, f_sop = fault["gps"], fault["sop1"]
@@ -451,7 +432,10 @@ class Seed004Uav(Study):
         data = {"t_s": ("epoch", geom.t_s), "hpl_m": (("n_sops", "epoch"), hpl),
                 "vpl_m": (("n_sops", "epoch"), res["vpl"]), "hpe_m": (("n_sops", "epoch"), hpe),
                 "fault_bias_m": ("epoch", fault["bias_m"]),
-                "n_gps": ("epoch", np.sum(geom.valid & geom.is_gps, -1))}
+                "n_gps": ("epoch", np.sum(geom.valid & geom.is_gps, -1)),
+                "mi_count": ("n_sops", np.asarray([mi[n] for n in configs])),
+                "mi_ci_low": ("n_sops", np.asarray([mi_rate[n]["ci_low"] for n in configs])),
+                "mi_ci_high": ("n_sops", np.asarray([mi_rate[n]["ci_high"] for n in configs]))}
         for tag in ("gps", "sop1"):
             f = fault[tag]
             data[f"fault_sep_{tag}_m"] = (("epoch", "axis"), f["sep"])
@@ -473,10 +457,12 @@ class Seed004Uav(Study):
             "t_detect_gps_s": f_gps["t_detect"], "t_detect_sop1_s": f_sop["t_detect"],
             "t_detect_noise_free_gps_s": f_gps["t_detect_noise_free"],
             "t_detect_noise_free_sop1_s": f_sop["t_detect_noise_free"],
-            "exclusion": int(excl is not None)})
+            "exclusion": int(excl is not None),
+            "inject_sop_bias_m": params["inject_sop_bias_m"], "inject_sop": params["inject_sop"]})
         hpl_fig6 = excl["hpl"] if excl is not None else hpl[-1]
         hpe_fig6 = excl["hpe"] if excl is not None else hpe[-1]
         mi6 = int(np.sum(np.isfinite(hpl_fig6) & (hpe_fig6 > hpl_fig6)))
+        mi6_rate = mc.rate_with_interval(mi6, int(np.sum(np.isfinite(hpl_fig6))))
         note = (f"{n_t} epochs, sky: {desc}; sigma_URA^S = {params['sigma_ura_sop_m']:g} m, "
                 f"P_s^S = {params['p_s_sop']:g}; synthetic flight, not tuned")
         rows = [
@@ -489,15 +475,28 @@ class Seed004Uav(Study):
             {"quantity": f"epochs in normal operation (HPE <= HPL <= HAL {hal:g} m), GPS + "
                          f"{n_all} SOPs (Fig. 9)", "unit": "%", "published": 100.0,
              "reproduced": 100.0 * normal_all, "note": "all-in-view MHSS"},
+            {"quantity": f"MI rate (HPE > HPL), GPS + {n_all} SOPs (Fig. 6)", "unit": "%",
+             "published": 0.0, "reproduced": 100.0 * mi6_rate["rate"],
+             "note": (f"95 % Clopper-Pearson [{100 * mi6_rate['ci_low']:.3g}, "
+                      f"{100 * mi6_rate['ci_high']:.3g}] % over {mi6_rate['trials']} epochs; "
+                      "the seed's text gives no HPE or HPL level, only 'HPE can always be "
+                      "bounded' (Fig. 6)")},
             {"quantity": "+1 SOP raises the HPL (Fig. 8, Theorem 2): share of epochs",
-             "unit": "%", "published": None, "reproduced": 100.0 * raise1,
-             "note": "seed: 'adding one SOP slightly increases the HPL' (no number)"},
-            {"quantity": "mean HPL reduction, +1 SOP (Fig. 8)", "unit": "m", "published": None,
-             "reproduced": red.get(1, float("nan")), "note": "negative = HPL raised"},
-            {"quantity": "mean HPL reduction, +2 SOPs (Fig. 8)", "unit": "m", "published": None,
-             "reproduced": red.get(2, float("nan")), "note": "seed: two or more SOPs reduce"},
-            {"quantity": "mean HPL reduction, +8 SOPs (Fig. 8)", "unit": "m", "published": None,
-             "reproduced": red.get(8, float("nan")), "note": ""},
+             "unit": "%", "published": 100.0, "reproduced": 100.0 * raise1,
+             "note": "seed: 'adding one SOP slightly increases the HPL' (our reading: at every "
+                     "epoch; the size is in Fig. 8 only)"},
+            {"quantity": "+n SOPs (n = 2..8) reduce the HPL (Fig. 8): smallest share of epochs",
+             "unit": "%", "published": 100.0,
+             "reproduced": 100.0 * min((reduced[n] for n in n_red), default=float("nan")),
+             "note": "seed: 'for two or more SOPs, the results show HPL reduction over the "
+                     "experiment trajectory'"},
+        ] + [
+            {"quantity": f"mean HPL reduction, +{n} SOP{'s' if n > 1 else ''} (Fig. 8)",
+             "unit": "m", "published": None, "reproduced": red[n],
+             "note": ("the seed states no reduction in numbers (Fig. 8's curves only); "
+                      "negative = HPL raised") if n == 1 else ""}
+            for n in configs if 1 <= n <= 8
+        ] + [
             {"quantity": f"+1 SOP changes the fault-mode statistic of PRN {fault['prn']} "
                          "(Fig. 7a, Theorem 1): max |difference|", "unit": "m", "published": 0.0,
              "reproduced": sep_diff, "note": "seed: 'does not change the test statistics'"},
@@ -532,13 +531,14 @@ class Seed004Uav(Study):
             "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris), "epochs": n_t,
             "gps_visible_min": int(data["n_gps"][1].min()),
             "gps_visible_max": int(data["n_gps"][1].max()),
-            "sop_order": sop_ids, "carriers": group_names[1:],
+            "sop_order": sop_ids, "carriers": group_names[1:],  # = operators
             "share_epochs_all_hpl_finite": share_fin,
             "mean_hpl_m": {str(n): v for n, v in mean_hpl.items()},
             "mean_hpl_reduction_m": {str(n): v for n, v in red.items()},
-            "share_epochs_hpl_reduced": {str(n): float(np.mean((hpl[i] < hpl[0])[fin]))
-                                         for i, n in enumerate(configs)},
+            "share_epochs_hpl_reduced": {str(n): v for n, v in reduced.items()},
             "misleading_information_epochs": {str(n): v for n, v in mi.items()},
+            "misleading_information_rate": {str(n): v for n, v in mi_rate.items()},
+            "inject_sop_bias_m": params["inject_sop_bias_m"], "inject_sop": params["inject_sop"],
             "mhss_max_order": {str(n): v for n, v in zip(configs, orders, strict=True)},
             "median_hpe_m": {str(n): float(np.median(hpe[i])) for i, n in enumerate(configs)},
             "max_hpe_m": {str(n): float(np.max(hpe[i])) for i, n in enumerate(configs)},
@@ -568,6 +568,7 @@ class Seed004Uav(Study):
                 "exclusion_mean_hpl_m": float(np.mean(excl["hpl"][np.isfinite(excl["hpl"])]))
                 if np.isfinite(excl["hpl"]).any() else float("inf"),
                 "exclusion_misleading_information_epochs": mi6})
+        metrics["fig6_misleading_information_rate"] = mi6_rate
         return StudyResult(ds, rows, metrics, extra_provenance={
             "sky_source": desc, "real_ephemeris": bool(geom.real_ephemeris),
             "recording": params["recording"]})
@@ -576,98 +577,4 @@ class Seed004Uav(Study):
     def plot(self, out_dir):
         """fig6_hpe_hpl.png, fig7_detection_sensitivity.png, fig8_hpl_reduction.png and
         fig9_stanford.png (Figs. 6-9) in out_dir; returns their paths."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
-        a = ds.attrs
-        t = ds["t_s"].values
-        n_sops = ds["n_sops"].values
-        hpl, hpe = ds["hpl_m"].values, ds["hpe_m"].values
-        files = []
-        # Fig. 6
-        fig, ax = plt.subplots(figsize=(7, 3.6))
-        if "hpl_excl_m" in ds:
-            ax.plot(t, ds["hpl_excl_m"].values, color="tab:red", lw=1,
-                    label="HPL (MHSS, detection and exclusion)")
-            ax.plot(t, ds["hpe_excl_m"].values, color="tab:blue", lw=0.8, label="HPE")
-        else:
-            ax.plot(t, hpl[-1], color="tab:red", lw=1, label="HPL (MHSS all-in-view)")
-            ax.plot(t, hpe[-1], color="tab:blue", lw=0.8, label="HPE")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("m")
-        ax.set_title(f"Seed 004 Fig. 6: GPS + {n_sops[-1]} SOPs ({a['sky_source']})", fontsize=8)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(f"{out_dir}/fig6_hpe_hpl.png", dpi=130)
-        plt.close(fig)
-        files.append("fig6_hpe_hpl.png")
-        # Fig. 7
-        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.4), sharex=True)
-        ratio = (ds["fault_sep_gps_m"].values[:, :2]
-                 / np.maximum(ds["fault_thr_gps_m"].values[:, :2], 1e-9))
-        q = int(np.argmax(np.max(ratio, 0)))  # the horizontal axis with the largest tau
-        lab = "EN"[q]
-        a1.plot(t, ds["fault_sep_gps_m"].values[:, q], color="tab:blue", lw=1.6,
-                label=f"|dx_{lab}| GPS only")
-        a1.plot(t, ds["fault_sep_sop1_m"].values[:, q], color="tab:orange", ls="--", lw=1,
-                label=f"|dx_{lab}| GPS + SOP 1")
-        a1.plot(t, ds["fault_thr_gps_m"].values[:, q], color="tab:blue", lw=0.8, ls=":",
-                label="threshold GPS only")
-        a1.plot(t, ds["fault_thr_sop1_m"].values[:, q], color="tab:orange", lw=0.8, ls="-.",
-                label="threshold GPS + SOP 1")
-        a1.set_ylabel("m")
-        a1.set_title(f"Seed 004 Fig. 7: PRN {a['fault_prn']} fault mode, ramp "
-                     f"{a['fault_ramp_mps']:g} m/s from {a['fault_onset_s']:g} s; detected at "
-                     f"{a['t_detect_gps_s']:.1f} s (GPS) vs {a['t_detect_sop1_s']:.1f} s (+SOP 1)"
-                     f"\nnoise-free (bias = minimum detectable bias): "
-                     f"{a['t_detect_noise_free_gps_s']:.3f} s vs "
-                     f"{a['t_detect_noise_free_sop1_s']:.3f} s", fontsize=8)
-        a1.legend(fontsize=7)
-        a2.plot(t, ds["fault_tau_gps"].values - ds["fault_tau_sop1"].values, color="k", lw=0.8)
-        a2.set_ylabel("tau GPS - tau GPS+SOP 1")
-        a2.set_xlabel("time (s)")
-        fig.tight_layout()
-        fig.savefig(f"{out_dir}/fig7_detection_sensitivity.png", dpi=130)
-        plt.close(fig)
-        files.append("fig7_detection_sensitivity.png")
-        # Fig. 8
-        fig, ax = plt.subplots(figsize=(7, 3.8))
-        cmap = plt.get_cmap("viridis")
-        for i, n in enumerate(n_sops):
-            if 1 <= n <= 8:
-                ax.plot(t, hpl[0] - hpl[i], lw=0.9, color=cmap((n - 1) / 7), label=f"{n} SOPs")
-        ax.axhline(0, color="k", lw=0.6)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("HPL reduction (m)")
-        ax.set_title("Seed 004 Fig. 8: HPL(GPS) - HPL(GPS + n SOPs)", fontsize=9)
-        ax.legend(fontsize=7, ncol=4)
-        fig.tight_layout()
-        fig.savefig(f"{out_dir}/fig8_hpl_reduction.png", dpi=130)
-        plt.close(fig)
-        files.append("fig8_hpl_reduction.png")
-        # Fig. 9
-        sel = [i for i, n in enumerate(n_sops) if n in STANFORD_SOPS]
-        fig, axes = plt.subplots(1, len(sel), figsize=(3.0 * len(sel), 3.2), squeeze=False)
-        hal = float(a["hal_m"])
-        top = max(hal * 1.5, float(np.nanmax(np.where(np.isfinite(hpl), hpl, 0))) * 1.1)
-        for ax, i in zip(axes[0], sel, strict=True):
-            h = np.minimum(hpl[i], top)
-            e = np.minimum(hpe[i], top)
-            mi = int(np.sum(hpe[i] > hpl[i]))
-            ax.plot([0, top], [0, top], "k", lw=0.6)
-            ax.axvline(hal, color="r", lw=0.6)
-            ax.axhline(hal, color="r", lw=0.6)
-            ax.plot(e, h, ".", ms=1.5, alpha=0.5)
-            ax.set_xlim(0, top)
-            ax.set_ylim(0, top)
-            ax.set_title(f"GPS + {n_sops[i]} SOPs: MI {mi}", fontsize=8)
-            ax.set_xlabel("HPE (m)", fontsize=8)
-        axes[0][0].set_ylabel("HPL (m)")
-        fig.suptitle("Seed 004 Fig. 9: Stanford diagrams (MHSS all-in-view)", fontsize=9)
-        fig.tight_layout()
-        fig.savefig(f"{out_dir}/fig9_stanford.png", dpi=130)
-        plt.close(fig)
-        files.append("fig9_stanford.png")
-        return [f"{out_dir}/{f}" for f in files]
+        return plot_uav(out_dir)
