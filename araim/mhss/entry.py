@@ -33,6 +33,7 @@ from oaraim.araim.fault_modes import (
 from oaraim.araim.mhss.inputs import (
     INPUT_RANGES,
     Sources,
+    broadcast_batch,
     check_inputs,
     check_options,
     host_inputs,
@@ -160,11 +161,8 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
     cache-sized chunks (``araim.batching``). ``input_flags`` also returns ``invalid_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
-    batch = g.shape[:-2]
-    L, C = g.shape[-2], p_const.shape[-1]
-    arrays = [jnp.broadcast_to(x, batch + s) for x, s in (
-        (g, (L, 3)), (constellation, (L,)), (var_int, (L,)), (var_acc, (L,)), (b_nom, (L,)),
-        (p_sat, (L,)), (p_const, (C,)), (valid, (L,)))]
+    arrays, batch = broadcast_batch(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                    valid)
 
     def kernel(*xs):
         return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,

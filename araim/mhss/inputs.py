@@ -11,8 +11,8 @@ from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.validate import UNIT_ROW_TOLERANCE, batch_source, check_unit_rows, unit_norm
 
-__all__ = ["INPUT_RANGES", "UNIT_ROW_TOLERANCE", "Sources", "check_inputs", "check_options",
-           "host_inputs", "in_range", "invalid_input_flags", "prepare_inputs"]
+__all__ = ["INPUT_RANGES", "UNIT_ROW_TOLERANCE", "Sources", "broadcast_batch", "check_inputs",
+           "check_options", "host_inputs", "in_range", "invalid_input_flags", "prepare_inputs"]
 
 
 class Sources(NamedTuple):
@@ -97,6 +97,17 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
 #: bound, exclusive)
 INPUT_RANGES = {"var_int_m2": (0.0, False, np.inf), "var_acc_m2": (0.0, False, np.inf),
                  "b_nom_m": (0.0, True, np.inf), "p_sat": (0.0, True, 1.0)}
+
+
+def broadcast_batch(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid):
+    """The eight kernel inputs broadcast to g's batch shape (``(..., L, 3)``, ``(..., L)``,
+    ``(..., C)``), as the list ``araim.batching.map_chunks`` takes, and that batch shape."""
+    batch = g.shape[:-2]
+    L, C = g.shape[-2], p_const.shape[-1]
+    arrays = [jnp.broadcast_to(x, batch + s) for x, s in (
+        (g, (L, 3)), (constellation, (L,)), (var_int, (L,)), (var_acc, (L,)), (b_nom, (L,)),
+        (p_sat, (L,)), (p_const, (C,)), (valid, (L,)))]
+    return arrays, batch
 
 
 def check_options(budget, all_in_view_weighting):

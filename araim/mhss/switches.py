@@ -29,7 +29,7 @@ from oaraim.araim.batching import jit_kernel, map_chunks
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import check_order, fault_mode_rule, select_fault_modes
 from oaraim.araim.mhss.entry import batch_last_inputs
-from oaraim.araim.mhss.inputs import Sources, check_options
+from oaraim.araim.mhss.inputs import Sources, broadcast_batch, check_options
 from oaraim.araim.mhss.projection import project
 from oaraim.araim.validate import check_int
 
@@ -109,11 +109,8 @@ def _flags_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid
 
 def _switch_flags(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
                   max_order, all_in_view_weighting, rule, rtol, band):
-    batch = g.shape[:-2]
-    L, C = g.shape[-2], p_const.shape[-1]
-    arrays = [jnp.broadcast_to(x, batch + s) for x, s in (
-        (g, (L, 3)), (constellation, (L,)), (var_int, (L,)), (var_acc, (L,)), (b_nom, (L,)),
-        (p_sat, (L,)), (p_const, (C,)), (valid, (L,)))]
+    arrays, batch = broadcast_batch(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
+                                    valid)
 
     def kernel(*xs):
         return _flags_flat(*xs, budget, max_order, all_in_view_weighting, rule, rtol, band)
