@@ -103,4 +103,6 @@ def test_vehicle_mi_check_can_fail(shared_data):
     clean, bad = mi(), mi(inject_lte_bias_m="40")
     assert bad["epochs"]["count"] > 10 * max(clean["epochs"]["count"], 1)
     assert bad["draws_with_any"]["ci_low"] > clean["draws_with_any"]["rate"]
-    assert bad["epochs"]["ci_low"] < bad["epochs"]["rate"] < bad["epochs"]["ci_high"]
+    # at the calibrated defaults (LTE noise 2.6 m) the 40 m bias makes every epoch MI: the
+    # Clopper-Pearson interval then ends at 1, the rate itself
+    assert bad["epochs"]["ci_low"] < bad["epochs"]["rate"] <= bad["epochs"]["ci_high"]
