@@ -11,7 +11,6 @@ correlated, and an interval over them is narrower than the truth (say so where i
 """
 
 import numpy as np
-from scipy import stats
 
 
 def clopper_pearson(k, n, confidence=0.95):
@@ -23,6 +22,8 @@ def clopper_pearson(k, n, confidence=0.95):
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
     if np.any(k < 0) or np.any(k > n) or np.any(k != np.round(k)) or np.any(n != np.round(n)):
         raise ValueError(f"need integers 0 <= k <= n, got k={k!r}, n={n!r}")
+    from scipy import stats  # ~0.5-1 s to import: here, not on `import oaraim.mc`
+
     a = 1.0 - confidence
     with np.errstate(invalid="ignore", divide="ignore"):
         lo = np.where(k > 0, stats.beta.ppf(a / 2, k, n - k + 1), 0.0)

@@ -10,19 +10,18 @@ from collections.abc import Callable
 
 #: the parts of ``oaraim bench`` that ``--only`` chooses from (all run by default)
 BENCH_PARTS = ("startup", "latency", "slope", "mhss", "fig3", "sky", "ekf", "map", "risk")
-#: the long parts, each run only when asked for by its own flag
-EXTRA_PARTS = ("fig4", "world-map", "dask-map")
 #: the 1 x 1 deg world grid of the ``world-map`` and ``dask-map`` parts
 WORLD_1DEG = {"lat_deg": "-90:90:1", "lon_deg": "-180:179:1"}
 
 
 def run_bench(parts, quick: bool = False, mhss_batch: int | None = None,
               say: Callable[[str], None] = print) -> dict:
-    """Run the chosen ``parts`` (names of ``BENCH_PARTS`` and ``EXTRA_PARTS``) in the order of
-    those tuples, print one line per result through ``say``, and return the records by key
-    (``startup``, ``latency``, ``slope_hpl``, ``mhss``, ..., ``fig4``,
-    ``availability_map_world``, ``availability_map_dask``). ``mhss_batch`` is the batch of the
-    MHSS throughput rows (default 65,536, 16,384 when ``quick``)."""
+    """Run the chosen ``parts`` (names of ``BENCH_PARTS``, and the long parts "world-map",
+    "dask-map" and "fig4" that only their own flags choose) in that order, print one line per
+    result through ``say``, and return the records by key (``startup``, ``latency``,
+    ``slope_hpl``, ``mhss``, ..., ``fig4``, ``availability_map_world``,
+    ``availability_map_dask``). ``mhss_batch`` is the batch of the MHSS throughput rows
+    (default 65,536, 16,384 when ``quick``)."""
     from oaraim import bench as b
 
     batch = mhss_batch or (16_384 if quick else 65_536)

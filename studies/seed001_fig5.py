@@ -108,13 +108,17 @@ def compact(az, el, valid, n_slots):
     return take(az), take(el), take(valid)
 
 
+def draw_key(seed_key, epoch, draw):
+    """Key of tower draw ``draw`` at epoch ``epoch``: fold_in(fold_in(key(seed), e), i)."""
+    return jax.random.fold_in(jax.random.fold_in(seed_key, epoch), draw)
+
+
 @functools.lru_cache(maxsize=8)
 def _epoch_keys_fn(n_draws):
     @jax.jit
     def keys(seed_key, epochs):
-        return jax.vmap(lambda e: jax.vmap(
-            lambda i: jax.random.fold_in(jax.random.fold_in(seed_key, e), i))(
-                jnp.arange(n_draws, dtype=jnp.uint32)))(epochs)
+        return jax.vmap(lambda e: jax.vmap(lambda i: draw_key(seed_key, e, i))(
+            jnp.arange(n_draws, dtype=jnp.uint32)))(epochs)
     return keys
 
 
@@ -299,9 +303,8 @@ class Fig5Madrid24h(Study):
         variables on the dims ``instance_slot`` and ``instance_tower``."""
         fin = np.isfinite(hpl_gps)
         e = int(np.argmax(np.where(fin, hpl_gps, -np.inf))) if fin.any() else 0
-        key = jax.random.fold_in(jax.random.fold_in(seed_key, e), 0)
-        tw = geometry.bpp_towers(key, params["n_sops"], params["d_min_m"], params["d_max_m"],
-                                 params["h_min_m"], params["h_max_m"])
+        tw = geometry.bpp_towers(draw_key(seed_key, e, 0), params["n_sops"], params["d_min_m"],
+                                 params["d_max_m"], params["h_min_m"], params["h_max_m"])
         return {"instance_gps_az_rad": ("instance_slot", az[e]),
                 "instance_gps_el_rad": ("instance_slot", el[e]),
                 "instance_gps_valid": ("instance_slot", valid[e]),

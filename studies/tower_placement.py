@@ -398,7 +398,7 @@ class TowerPlacement(Study):
     def run(self, params, realizations, seed, progress):
         """Random placements, gradient descent from the best of them, greedy + swap and
         exhaustive selection among the candidates, refinement; maps for the figures."""
-        from oaraim.studies.tower_placement_report import finish
+        from oaraim.studies.tower_placement_report import finish, median_index
 
         sky = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         prob = Problem(params, sky)
@@ -425,8 +425,7 @@ class TowerPlacement(Study):
         _advance(progress, realizations - realizations // 2)
         none = np.zeros((n_t, 3)), np.zeros(n_t, bool)
         maps = {"gps_only": prob.hpl_map(*none, box),
-                "random_median": prob.hpl_map(rand[np.argsort(q_rand, kind="stable")
-                                                   [len(q_rand) // 2]],
+                "random_median": prob.hpl_map(rand[median_index(q_rand)],
                                               np.ones(n_t, bool), box),
                 "optimised": prob.hpl_map(free[0], np.ones(n_t, bool), box)}
         q_gps = float(prob.score(prob.hpls(none[0][None], none[1][None]))[0])

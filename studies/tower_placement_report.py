@@ -6,13 +6,18 @@ import xarray as xr
 from oaraim.studies.base import StudyResult
 
 
+def median_index(q):
+    """Index of the upper median of ``q`` (the placement the study shows as "median")."""
+    return int(np.argsort(q, kind="stable")[len(q) // 2])
+
+
 def finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy, swaps, exh,
            refined, maps, q_gps):
     """The ``StudyResult`` of a run of ``studies.tower_placement`` (its ``run`` computes the
     arguments: random placements and their objective, the descents, the selections, maps)."""
     n_it = params["iterations"]
     box = params["box_half_m"]
-    i_med = np.argsort(q_rand, kind="stable")[len(q_rand) // 2]  # the upper median placement
+    i_med = median_index(q_rand)
     q_med = float(q_rand[i_med])
     ds = xr.Dataset(
         {"random_objective": ("placement", q_rand),
