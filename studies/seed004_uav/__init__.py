@@ -19,16 +19,28 @@ Setup:
     order (seed 004 VII-D: "the order of adding SOPs followed the numbering"): +1 = one AT&T
     tower, a new constellation with one SOP (Theorem 2); +2 .. +5 AT&T; +6 = the first
     T-Mobile tower (a new clock again); +11 = all.
-  * Measurements: ``sim.gnss`` (module docstring); noise GPS N(0, C_acc) (ADD
-    accuracy model, sigma_URE = 2/3 sigma_URA), LTE N(0, ``sigma_lte_noise_m``^2) with 2 m
-    (the scenario's "meter-level" LTE ranging); the noise of epoch k is drawn from
-    fold_in(key(seed), k), so an epoch's result does not depend on N. ``--set recording=PATH``
+  * Measurements: ``sim.gnss`` (module docstring) with the errors of the shared error world
+    (``--set world=realistic``, the default; docs/error-world.md): GPS ``sim.gnss_errors``
+    (``sim.GnssErrorModel()``: Gauss-Markov URE at 2/3 sigma_URA, uniform nominal bias within
+    b_nom, troposphere residual, 2x the ADD airborne multipath, white noise), towers
+    ``sim.sop_errors`` (``sim.ErrorModel()`` with thermal noise ``sigma_pr_m``: multipath,
+    NLOS episodes, each tower's epsilon_n and its operator's common clock term, seed 004 eq. 3;
+    the clocks fitted over a 300 s GNSS period before take-off, seed 000 II-D), drawn from the
+    flight's key fold_in(key(seed), 0); ``world_errors``. The PL keeps its own model (GPS
+    sigma_URA 1 m with the ADD terms, SOP sigma_URA^S = 3 m, the seed's semi-urban value of
+    VII-D: not estimated from the data). ``--set world=clean`` is the study before the error
+    world: GPS N(0, C_acc) (ADD accuracy model), LTE N(0, ``sigma_lte_noise_m``^2) with 2 m,
+    epoch k from fold_in(key(seed), k) (``draw_noise``). Either way the whole flight is drawn
+    and ``--realizations N`` keeps its first N epochs, so an epoch's result does not depend on
+    N. ``--set recording=PATH``
     replays a recorded flight (``geometry.recording`` format with gnss, pseudoranges, truth)
     through the same path instead. ``inject_sop_bias_m`` adds a constant bias to one SOP
     (``inject_sop``), an error outside the PL's model: the MI counts can then fail.
   * MI (HPE > HPL) per configuration with its rate and 95 % Clopper-Pearson interval
-    (``mc.rate_with_interval``) over the epochs with a finite HPL; the synthesized noise is
-    independent from epoch to epoch, so given the geometry the epochs are independent trials.
+    (``mc.rate_with_interval``) over the epochs with a finite HPL; the clean world's noise is
+    independent from epoch to epoch, so given the geometry the epochs are independent trials;
+    the realistic world's errors are correlated (multipath, NLOS episodes, clock drift), and
+    the interval, which assumes independence, is then too narrow (the row's note says so).
   * Integrity: Table I (``araim.BUDGET_SEED004_TABLE_I`` by its symbols), P_s^S = 1e-4 and
     sigma_URA^S = 3 m (seed 004 VII-A and VII-D), P_const^S = 1e-4, SOP b_nom = 0, SOP user
     term 0, GPS user term the ADD dual-frequency airborne model (DESIGN.md "silent").
@@ -58,6 +70,7 @@ from oaraim.studies.seed004_uav.study import (
     labels,
     model_variances,
     synthesize,
+    world_errors,
 )
 from oaraim.studies.seed004_uav.towers import (
     CARRIERS_MHZ,
@@ -83,4 +96,5 @@ __all__ = [
     "synthesize",
     "tower_operators",
     "towers_enu_m",
+    "world_errors",
 ]
