@@ -21,8 +21,10 @@ import numpy as np
 SENSITIVITY_STEP = 0.05
 #: relative tolerance of the fitted parameters (of their range)
 X_TOL = 1e-3
-#: tolerance of the sum of squared relative residuals (residuals of ~3e-4)
-F_TOL = 1e-7
+#: tolerance of the sum of squared relative residuals (residuals of ~3e-3: a Monte Carlo
+#: target's own noise at the calibration sizes; 1e-7 left seed 000's 200-run fit crawling for
+#: 20 evaluations within 0.01 m of its answer)
+F_TOL = 1e-5
 #: Nelder-Mead's first simplex: this share of each parameter's range from the start
 SIMPLEX_STEP = 0.1
 

@@ -21,6 +21,7 @@ from oaraim.studies.base import (
     count,
     fault_modes_param,
     in_range,
+    non_negative,
     parse_choice,
     parse_recording,
     positive,
@@ -142,7 +143,7 @@ def world_errors(geom, params, seed):
     tw = np.flatnonzero(~geom.is_gps)
     operator = labels(geom)[0][tw] - 1  # 0 = the first operator (labels: GPS is 0)
     world = sim.ErrorModel(sigma_pr_m=params["sigma_pr_m"], fault_onset_s=np.inf,
-                           fault_bias_m=0.0)
+                           fault_bias_m=0.0, nlos_rate_per_s=params["nlos_rate_per_s"])
     t_s = jnp.asarray(geom.t_s)
     t_cal_s = -jnp.arange(GNSS_PERIOD_EPOCHS, dtype=t_s.dtype)[::-1]
     gps = np.asarray(sim.gnss_errors(key, t_s, jnp.asarray(geom.el_rad),
@@ -237,6 +238,11 @@ class Seed004Uav(Study):
                        "N(0, sigma_lte_noise_m^2))"),
         "sigma_pr_m": Param(sim.ErrorModel().sigma_pr_m, positive, "LTE thermal (white) "
                             "noise of the realistic world (sim.ErrorModel default)", "m"),
+        "nlos_rate_per_s": Param(0.0, non_negative, "NLOS episode onsets per second on each "
+                                 "tower in the realistic world (the world's default is 1/250 s "
+                                 "for a car in a street; 0 here: an aircraft above the roofs "
+                                 "sees the towers in line of sight, seed 004 refs. [52]-[53])",
+                                 "1/s"),
         "sigma_lte_noise_m": Param(2.0, positive, "LTE pseudorange noise of the clean world "
                                    "(scenario: meter-level LTE ranging)", "m"),
         "fault_prn": Param("auto", parse_prn, "GPS PRN of the Fig. 7 ramp ('auto': 8 if in "
