@@ -131,7 +131,8 @@ def test_missing_epochs_become_prediction_only(drive):
 def test_study_defaults_are_the_realistic_world_and_the_scenario_fault():
     """Issue 25: the studies' default world is ``sim.ErrorModel()`` (the realistic one) with
     the scenario's fault, except the parameters a study calibrated (``calibrated``: seed 000's
-    fault size and multipath, fitted to its RMSEs by ``oaraim calibrate``)."""
+    fault size and multipath, fitted to its RMSEs by ``oaraim calibrate``) and the world
+    parameters it chose on its own evidence (``chosen``: seed 000's NLOS rate 0)."""
     from oaraim.studies.common.ekf_drive import world_of
     for name, sc in (("seed000-ekf-raim", sim.drive_seed000()),
                      ("seed002-outlier", sim.drive_seed002())):
@@ -139,9 +140,11 @@ def test_study_defaults_are_the_realistic_world_and_the_scenario_fault():
         p = study.validate({})
         assert p["world"] == "realistic" and p["filter_sigma_pr_m"] == 0.0
         want = sim.ErrorModel(fault_tower=sc.fault_tower, fault_onset_s=sc.fault_onset_s,
-                              fault_bias_m=sc.fault_bias_m)._replace(**study.calibrated)
+                              fault_bias_m=sc.fault_bias_m)._replace(
+            **study.calibrated, **{k: v for k, (v, _) in study.chosen.items()})
         assert world_of(p) == want
         assert {k: p[k] for k in study.calibrated} == study.calibrated
+        assert all(p[k] == v for k, (v, _) in study.chosen.items())
         assert p["fault_tower"] == sc.fault_tower + 1
         assert sc.towers_enu_m.shape[0] == 5
         clean = world_of(STUDIES[name].validate({"world": "clean"}))

@@ -268,7 +268,9 @@ def test_uav_realistic_world_wiring(shared_data):
     tw = ~geom.is_gps
     operator = jnp.asarray([0] * 5 + [1] * 3 + [2] * 3)
     t = jnp.asarray(geom.t_s)
-    sop, sig_ref = sim.sop_errors(key, sim.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0), t,
+    world = sim.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0, nlos_rate_per_s=0.0)
+    assert p["nlos_rate_per_s"] == 0.0  # the aircraft sees the towers in line of sight
+    sop, sig_ref = sim.sop_errors(key, world, t,
                                   11, -jnp.arange(u.GNSS_PERIOD_EPOCHS, dtype=t.dtype)[::-1],
                                   operator)
     np.testing.assert_allclose(e_world[:, tw], np.asarray(sop), rtol=1e-12)
