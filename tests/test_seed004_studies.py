@@ -268,8 +268,11 @@ def test_uav_realistic_world_wiring(shared_data):
     tw = ~geom.is_gps
     operator = jnp.asarray([0] * 5 + [1] * 3 + [2] * 3)
     t = jnp.asarray(geom.t_s)
-    world = sim.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0, nlos_rate_per_s=0.0)
-    assert p["nlos_rate_per_s"] == 0.0  # the aircraft sees the towers in line of sight
+    world = sim.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0, nlos_rate_per_s=0.0,
+                           calib_window_s=float(u.GNSS_PERIOD_EPOCHS))
+    # the aircraft sees the towers in line of sight and fits their clocks over the whole
+    # pre-flight GNSS period
+    assert p["nlos_rate_per_s"] == 0.0 and p["calib_window_s"] == u.GNSS_PERIOD_EPOCHS
     sop, sig_ref = sim.sop_errors(key, world, t,
                                   11, -jnp.arange(u.GNSS_PERIOD_EPOCHS, dtype=t.dtype)[::-1],
                                   operator)

@@ -143,7 +143,8 @@ def world_errors(geom, params, seed):
     tw = np.flatnonzero(~geom.is_gps)
     operator = labels(geom)[0][tw] - 1  # 0 = the first operator (labels: GPS is 0)
     world = sim.ErrorModel(sigma_pr_m=params["sigma_pr_m"], fault_onset_s=np.inf,
-                           fault_bias_m=0.0, nlos_rate_per_s=params["nlos_rate_per_s"])
+                           fault_bias_m=0.0, nlos_rate_per_s=params["nlos_rate_per_s"],
+                           calib_window_s=params["calib_window_s"])
     t_s = jnp.asarray(geom.t_s)
     t_cal_s = -jnp.arange(GNSS_PERIOD_EPOCHS, dtype=t_s.dtype)[::-1]
     gps = np.asarray(sim.gnss_errors(key, t_s, jnp.asarray(geom.el_rad),
@@ -243,6 +244,11 @@ class Seed004Uav(Study):
                                  "for a car in a street; 0 here: an aircraft above the roofs "
                                  "sees the towers in line of sight, seed 004 refs. [52]-[53])",
                                  "1/s"),
+        "calib_window_s": Param(float(GNSS_PERIOD_EPOCHS), in_range(2.0, GNSS_PERIOD_EPOCHS),
+                                "realistic world: the last seconds of the pre-flight GNSS "
+                                "period over which the tower clocks are fitted (the world's "
+                                "default is 120 s; here the whole period: the UAV waits on "
+                                "the ground with GPS)", "s"),
         "sigma_lte_noise_m": Param(2.0, positive, "LTE pseudorange noise of the clean world "
                                    "(scenario: meter-level LTE ranging)", "m"),
         "fault_prn": Param("auto", parse_prn, "GPS PRN of the Fig. 7 ramp ('auto': 8 if in "
