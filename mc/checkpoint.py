@@ -41,15 +41,15 @@ def identity(study, params, seed, realizations):
 
 def encode(value, arrays):
     """``value`` as a JSON tree, its arrays appended to ``arrays`` (referenced by index)."""
-    if isinstance(value, np.ndarray | np.generic) and not isinstance(value, np.bool_ | bool):
-        if isinstance(value, np.generic):
-            return {"scalar": value.item()} if value.dtype.kind in "biuf" else str(value)
-        arrays.append(value)
-        return {"array": len(arrays) - 1}
     if isinstance(value, bool | np.bool_):
         return bool(value)
-    if value is None or isinstance(value, int | float | str):
+    if value is None or type(value) in (int, float, str):
         return value
+    if isinstance(value, np.generic) and value.dtype.kind in "iufU":  # np.float64, np.int64...
+        return {"scalar": value.item()}
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+        arrays.append(value)
+        return {"array": len(arrays) - 1}
     if isinstance(value, dict):
         if not all(isinstance(k, str) for k in value):
             raise TypeError("a checkpointed dict needs string keys")
