@@ -1,5 +1,6 @@
 """How many epochs are run: keys, chunked vmapped execution, streaming reductions, storage,
-resumable and distributable parameter sweeps (``mc.sweep``)."""
+resumable and distributable parameter sweeps (``mc.sweep``), and checkpoints of the studies
+that are not sweeps (``mc.checkpoint``)."""
 
 if __name__ != "oaraim.mc":  # the source folder is importable from the checkout's root
     raise ImportError(f"import oaraim.mc, not {__name__}: the folder mc/ installs as "

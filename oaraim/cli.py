@@ -46,7 +46,7 @@ def _trust(on: bool):
 def list_studies():
     """List the studies with their parameters and defaults."""
     from oaraim.registry import STUDIES
-    from oaraim.studies.base import SweepStudy
+    from oaraim.studies.base import ResumableStudy, SweepStudy
 
     for name, s in STUDIES.items():
         # the texts are printed literally (markup=False): a "[d_min_m, d_max_m]" in a help
@@ -60,6 +60,9 @@ def list_studies():
             out.print(f"  sweep over {' x '.join(s.axis_names)} (--resume, --workers N, "
                       "--scheduler ADDRESS); realizations are per cell", highlight=False,
                       markup=False)
+        elif isinstance(s, ResumableStudy):
+            out.print("  resumable (--resume): each finished stage is checkpointed",
+                      highlight=False, markup=False)
         for key, p in s.params.items():
             unit = f" {p.unit}" if p.unit else ""
             default = (",".join(str(v) for v in p.default) if isinstance(p.default, tuple)
@@ -82,8 +85,8 @@ def run(
     scheduler: Annotated[str | None, typer.Option(
         help="sweep studies: run on an existing Dask scheduler (tcp://HOST:PORT)")] = None,
     resume: Annotated[bool, typer.Option(
-        "--resume", help="sweep studies: keep the finished chunks in OUT/STUDY, compute the "
-        "rest")] = False,
+        "--resume", help="resumable studies (sweeps, tower-placement, sop-requirements): keep the "
+        "finished chunks or units in OUT/STUDY, compute the rest")] = False,
     trust_data: Annotated[bool, typer.Option("--trust-data", help=TRUST_HELP)] = False,
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
@@ -388,5 +391,6 @@ def main():
     try:
         app()
     except KeyboardInterrupt:
-        err.print("interrupted (a sweep keeps its finished chunks: rerun with --resume)")
+        err.print("interrupted (a resumable study keeps its finished chunks or units: rerun "
+                  "with --resume)")
         sys.exit(130)

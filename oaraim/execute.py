@@ -5,17 +5,18 @@ import time
 import warnings
 from pathlib import Path
 
+from oaraim.mc.checkpoint import Checkpoint, identity
 from oaraim.mc.progress import ProgressBar
 from oaraim.mc.store import OutputLock, provenance, write_results
 from oaraim.mc.sweep import Execution
 from oaraim.registry import STUDIES, get_study
 from oaraim.studies import base
-from oaraim.studies.base import SweepStudy
+from oaraim.studies.base import ResumableStudy, SweepStudy
 
 __all__ = ["check_data", "data_provenance", "parse_sets", "run_study", "run_sweep_study",
            "sweep_kernel"]
 
-SWEEP_FLAGS = "--resume, --workers and --scheduler"
+SWEEP_FLAGS = "--workers and --scheduler"
 
 
 def parse_sets(sets):
@@ -58,8 +59,13 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
 
 def _check_sweep_flags(study, resume, execution):
     workers, scheduler = execution.workers, execution.scheduler
+    if resume and not isinstance(study, SweepStudy | ResumableStudy):
+        able = [n for n, s in STUDIES.items() if isinstance(s, SweepStudy | ResumableStudy)]
+        raise ValueError(f"--resume applies to resumable studies only and {study.name} is not "
+                         "one (it runs in one piece); drop --resume. Resumable: "
+                         + (", ".join(able) or "none registered"))
     if not isinstance(study, SweepStudy):
-        if resume or workers is not None or scheduler is not None:
+        if workers is not None or scheduler is not None:
             sweeps = [n for n, s in STUDIES.items() if isinstance(s, SweepStudy)]
             raise ValueError(f"{SWEEP_FLAGS} apply to sweep studies only and {study.name} is not "
                              "one; sweep studies: " + (", ".join(sweeps) or "none registered"))
@@ -74,8 +80,10 @@ def _check_sweep_flags(study, resume, execution):
 def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=False,
               show_progress=True, resume=False, execution=None):
     """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder, figure
-    paths, wall time in s). Sweep studies also take ``resume`` and ``execution`` (an
-    ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler`` address)."""
+    paths, wall time in s). Sweep studies and ``ResumableStudy`` ones take ``resume`` (reuse
+    the finished chunks or checkpointed units in ``out/name/``); sweep studies also take
+    ``execution`` (an ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler``
+    address)."""
     study = get_study(name)
     execution = Execution() if execution is None else execution
     _check_sweep_flags(study, resume, execution)
@@ -115,6 +123,12 @@ def _run_locked(study, params, realizations, seed, out_dir, show_progress, resum
                                         resume=resume, execution=execution,
                                         progress=show_progress)
         extra["sweep"] = _sweep_provenance(sweep, resume)
+    elif isinstance(study, ResumableStudy):
+        checkpoint = Checkpoint(out_dir, identity(study.name, params, seed, realizations),
+                                resume=resume)
+        with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
+            result = study.run(params, realizations, seed, bar, checkpoint=checkpoint)
+        extra["checkpoint"] = checkpoint.provenance()
     else:
         with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
             result = study.run(params, realizations, seed, bar)

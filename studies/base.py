@@ -258,6 +258,30 @@ class Study:
         raise NotImplementedError
 
 
+class ResumableStudy(Study):
+    """A study whose run is a sequence of units of work (an optimiser's starts, a root per grid
+    point), each checkpointed (``mc.checkpoint``): ``oaraim run STUDY --resume`` reuses the
+    units an interrupted run finished, and the result is bit-identical to an uninterrupted run.
+
+    Subclasses implement ``run_units``, computing each unit as ``checkpoint.unit(name,
+    compute)`` (``compute()`` returns arrays, numbers, strings, lists, tuples or dicts; a name
+    is unique in the run and a file name) and deriving everything else from the units' values.
+    ``oaraim.execute.run_study`` passes an ``mc.checkpoint.Checkpoint`` in ``OUT/STUDY/``.
+    """
+
+    def run(self, params, realizations, seed, progress=None, checkpoint=None) -> StudyResult:
+        """``run_units`` with ``checkpoint`` (default: ``mc.checkpoint.NoCheckpoint``, every
+        unit computed, nothing stored)."""
+        from oaraim.mc.checkpoint import NoCheckpoint
+
+        checkpoint = NoCheckpoint() if checkpoint is None else checkpoint
+        return self.run_units(params, realizations, seed, progress, checkpoint)
+
+    def run_units(self, params, realizations, seed, progress, checkpoint) -> StudyResult:
+        """``Study.run`` with every unit of work computed through ``checkpoint.unit``."""
+        raise NotImplementedError
+
+
 class SweepStudy(Study):
     """A study that is a grid of cells (``mc.sweep``): resumable (``--resume``) and
     distributable (``--workers``, ``--scheduler``).

@@ -29,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
+from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
 from oaraim.mc.keys import realization_keys
-from oaraim.studies.base import Param, Study, axis, count, positive, probability
+from oaraim.studies.base import Param, ResumableStudy, axis, count, positive, probability
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.seed004 import TOL_M
 from oaraim.studies.seed004_fig4 import largest_reducing_sigma
@@ -44,13 +45,20 @@ LOG_TOL = 1e-4
 MAX_STEPS = 30
 
 
-def mean_sop_hpl(keys, hpl_gps_m, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, log10_p_s,
-                 p_const_sop, d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes):
+def mean_sop_hpl(hpl_gps_m, gps, sops, sigma_ura_sop_m, log10_p_s, p_const_sop, max_order,
+                 fault_modes):
     """(mean HPL reduction - TOL_M, mean GPS + SOP HPL) over the draws where both HPLs are
-    finite: differentiable in sigma_ura_sop_m and log10_p_s (``jax.jvp``)."""
-    out = c.sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, 10.0 ** log10_p_s,
-                       p_const_sop, d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes)
-    hs = out["hpl_sop_m"]
+    finite: differentiable in sigma_ura_sop_m and log10_p_s (``jax.jvp``). ``gps`` is the
+    draws' (az, el, valid) (R, S), ``sops`` their towers' (az, el, valid) (R, N) padded to a
+    common N (``padded_towers``: absent towers are invalid sources, which change no PL)."""
+    (az, el, v), (az_s, el_s, valid_s) = gps, sops
+    x = c.concat_inputs(c.gps_inputs(el, v),
+                        {**c.sop_inputs(az_s.shape, sigma_ura_sop_m, 10.0 ** log10_p_s, 1),
+                         "valid": valid_s})
+    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)],
+                        -2)
+    hs, _, _, _, _ = c.mhss(g, x, jnp.stack([jnp.float64(c.P_CONST_GPS), p_const_sop]),
+                            max_order, fault_modes)
     both = jnp.isfinite(hs) & jnp.isfinite(hpl_gps_m)
     hs0 = jnp.where(both, hs, 0.0)
     n = jnp.maximum(jnp.sum(both), 1)
@@ -58,17 +66,17 @@ def mean_sop_hpl(keys, hpl_gps_m, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, 
     return red - TOL_M, jnp.sum(hs0) / n
 
 
-@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
-def cell_derivatives(keys, hpl_gps_m, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, log10_p_s,
-                     p_const_sop, d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes):
+@functools.partial(jit_kernel, static_argnames=("max_order", "fault_modes"))
+def cell_derivatives(hpl_gps_m, gps, sops, sigma_ura_sop_m, log10_p_s, p_const_sop, max_order,
+                     fault_modes):
     """``mean_sop_hpl`` and its derivatives by forward mode, in one compiled program per
-    (n_sops, max_order): (f, mean HPL, df/dsigma, d HPL/dsigma, d HPL/dlog10 P_s). Every
-    evaluation of the study (probes, Newton steps, the check grid, the maps) uses it: a
-    second, value-only program would cost a compilation (20-45 s) for a 3x cheaper call."""
+    max_order (every SOP count shares it: the towers are padded to one count): (f, mean HPL,
+    df/dsigma, d HPL/dsigma, d HPL/dlog10 P_s). Every evaluation of the study (probes, Newton
+    steps, the check grid, the maps) uses it: a second, value-only program would cost a
+    compilation (20-45 s) for a 3x cheaper call."""
     def f(s, lp):
-        return jnp.stack(mean_sop_hpl(keys, hpl_gps_m, t_az, t_el, t_valid, n_sops, s, lp,
-                                      p_const_sop, d_min_m, d_max_m, h_min_m, h_max_m,
-                                      max_order, fault_modes))
+        return jnp.stack(mean_sop_hpl(hpl_gps_m, gps, sops, s, lp, p_const_sop, max_order,
+                                      fault_modes))
 
     x = (sigma_ura_sop_m, log10_p_s)
     val, d_s = jax.jvp(f, x, (jnp.ones_like(sigma_ura_sop_m), jnp.zeros_like(log10_p_s)))
@@ -76,25 +84,40 @@ def cell_derivatives(keys, hpl_gps_m, t_az, t_el, t_valid, n_sops, sigma_ura_sop
     return val[0], val[1], d_s[0], d_s[1], d_p[1]
 
 
+@functools.partial(jax.jit, static_argnames=("n_sops", "n_pad"))
+def padded_towers(keys, n_sops, n_pad, d_min_m, d_max_m, h_min_m, h_max_m):
+    """Fig. 4's BPP draw of ``n_sops`` towers per key (``c.draw_sops``, the grid study's
+    draws), padded with invalid towers to ``n_pad``: (az, el, valid) (R, n_pad)."""
+    tw = jax.vmap(lambda k: c.draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m))(keys)
+    pad = ((0, 0), (0, n_pad - n_sops))
+    valid = jnp.broadcast_to(jnp.arange(n_pad) < n_sops, (keys.shape[0], n_pad))
+    return jnp.pad(tw.az_rad, pad), jnp.pad(tw.el_rad, pad), valid
+
+
 class Cell:
-    """f and its derivatives for one (n SOPs, P_s^S) on the run's draws."""
+    """f and its derivatives for one (n SOPs, P_s^S) on the run's draws. Evaluations are
+    memoized by sigma (a probe, a grid value and a map value often coincide); ``evaluations``
+    counts every request (the cost of a method), memoized or not."""
 
     def __init__(self, draws, params, n_sops, p_s):
         self.d, self.n, self.lp = draws, int(n_sops), float(np.log10(p_s))
-        self.args = (params["p_const_sop"], params["d_min_m"], params["d_max_m"],
-                     params["h_min_m"], params["h_max_m"])
+        self.p_const = params["p_const_sop"]
         self.order = c.order_for(draws["slots"], self.n, float(p_s), params["p_const_sop"],
                                  params["fault_modes"])
         self.fm = params["fault_modes"]
         self.evaluations = 0
+        self.memo = {}
 
     def _eval(self, sigma):
         d = self.d
         self.evaluations += 1
-        out = cell_derivatives(d["keys"], d["hpl_gps"], d["az"], d["el"], d["valid"], self.n,
-                               jnp.float64(sigma), jnp.float64(self.lp), *self.args,
-                               self.order, self.fm)
-        return tuple(float(x) for x in out)
+        sigma = float(sigma)
+        if sigma not in self.memo:
+            out = cell_derivatives(d["hpl_gps"], d["gps"], d["towers"](self.n),
+                                   jnp.float64(sigma), jnp.float64(self.lp),
+                                   jnp.float64(self.p_const), self.order, self.fm)
+            self.memo[sigma] = tuple(float(x) for x in out)
+        return self.memo[sigma]
 
     def value(self, sigma):
         """f(sigma) (m)."""
@@ -143,7 +166,7 @@ def largest_root(cell, probes=PROBES_M):
     return float(np.exp(u)), MAX_STEPS
 
 
-class SopRequirements(Study):
+class SopRequirements(ResumableStudy):
     """SOP requirements (module docstring): the largest sigma_URA^S at which n SOPs still lower
     the mean HPL, per P_s^S, by Newton on exact derivatives, against Fig. 4's grid."""
 
@@ -179,30 +202,54 @@ class SopRequirements(Study):
         c.check_geometry_params(p)
 
     def draws(self, params, realizations, seed):
-        """Fig. 4's draws: keys, GPS-only HPLs and the sky table (device arrays)."""
+        """Fig. 4's draws: keys, GPS-only HPLs, each key's GPS sky (az, el, valid), the sky
+        table, and ``towers(n)``: the n-tower BPP draw padded to the run's largest SOP count
+        (memoized; device arrays)."""
         table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
         keys = realization_keys(int(seed), 0, 0, int(realizations))
         gps = c.gps_kernel(keys, jt["az_rad"], jt["el_rad"], jt["valid"], params["fault_modes"])
-        return {"keys": keys, "hpl_gps": gps["hpl_gps_m"], "az": jt["az_rad"],
-                "el": jt["el_rad"], "valid": jt["valid"], "slots": table["az_rad"].shape[1],
+        _, az, el, v = jax.vmap(lambda k: c.draw_gps(k, jt["az_rad"], jt["el_rad"],
+                                                     jt["valid"]))(keys)
+        n_pad = max((*params["n_sops"], *params["map_n_sops"]))
+        geo = tuple(params[k] for k in ("d_min_m", "d_max_m", "h_min_m", "h_max_m"))
+        towers = functools.lru_cache(maxsize=None)(
+            lambda n: padded_towers(keys, n, n_pad, *geo))
+        return {"keys": keys, "hpl_gps": gps["hpl_gps_m"], "gps": (az, el, v),
+                "towers": towers, "n_pad": n_pad, "slots": table["az_rad"].shape[1],
                 "table": table}
 
-    def run(self, params, realizations, seed, progress):
+    def run_units(self, params, realizations, seed, progress, checkpoint):
         """Newton roots per (n, P_s^S), Fig. 4's grid boundary at ``check_p_s``, the
-        sensitivity maps."""
+        sensitivity maps. Units (``checkpoint``): each root, each grid boundary, each map row
+        (one n and P_s^S), every one a value with the evaluations it cost."""
         from oaraim.studies.sop_requirements_report import finish
 
         d = self.draws(params, realizations, seed)
+        cells = {}
+
+        def cell(n, p):
+            if (n, p) not in cells:
+                cells[(n, p)] = Cell(d, params, n, p)
+            return cells[(n, p)]
+
+        def counted(name, n, p, compute):
+            def run():
+                e0 = cell(n, p).evaluations
+                value = compute(cell(n, p))
+                return {"value": value, "evaluations": cell(n, p).evaluations - e0}
+
+            out = checkpoint.unit(f"{name}-n{n}-p{p!r}", run)
+            return out["value"], int(out["evaluations"])
+
         ns, ps = params["n_sops"], params["p_s_sop"]
         roots = np.full((len(ns), len(ps)), np.nan)
         steps = np.zeros((len(ns), len(ps)), int)
         evals_newton = 0
         for i, n in enumerate(ns):
             for j, p in enumerate(ps):
-                cell = Cell(d, params, n, p)
-                roots[i, j], steps[i, j] = largest_root(cell)
-                evals_newton += cell.evaluations
+                (roots[i, j], steps[i, j]), e = counted("root", n, p, largest_root)
+                evals_newton += e
             _advance(progress, realizations * (i + 1) // (2 * len(ns))
                      - realizations * i // (2 * len(ns)))
         grid = np.asarray(c.SIGMA_GRID_M)
@@ -211,17 +258,15 @@ class SopRequirements(Study):
         evals_grid = 0
         for i, n in enumerate(ns):
             for j, p in enumerate(cps):
-                cell = Cell(d, params, n, p)
-                f = np.array([cell.value(s) for s in grid])
+                f, e = counted("grid", n, p, lambda cl: np.array([cl.value(s) for s in grid]))
                 bound[i, j] = largest_reducing_sigma((f + TOL_M)[None], grid)[0]
-                evals_grid += cell.evaluations
+                evals_grid += e
         mn, ms, mp = params["map_n_sops"], params["map_sigma_ura_sop_m"], params["map_p_s_sop"]
         sens = np.full((3, len(mn), len(mp), len(ms)), np.nan)
         for i, n in enumerate(mn):
             for j, p in enumerate(mp):
-                cell = Cell(d, params, n, p)
-                for k, s in enumerate(ms):
-                    sens[:, i, j, k] = cell.sensitivities(s)
+                sens[:, i, j], _ = counted("map", n, p, lambda cl: np.array(
+                    [cl.sensitivities(s) for s in ms]).T)
         _advance(progress, realizations - realizations // 2)
         return finish(params, d, realizations, roots, steps, evals_newton, bound, evals_grid,
                       sens)

@@ -44,7 +44,7 @@ import xarray as xr
 from oaraim import geometry, mc
 from oaraim.studies.base import (
     Param,
-    Study,
+    ResumableStudy,
     count,
     in_range,
     keyword_or_file,
@@ -333,7 +333,7 @@ def exhaustive(problem, sites, n_select, limit):
     return list(combos[i]), float(q[i]), q
 
 
-class TowerPlacement(Study):
+class TowerPlacement(ResumableStudy):
     """Tower placement (module docstring): the 99.5 % HPL of a region with random, gradient-
     optimised and selected SOP towers."""
 
@@ -395,40 +395,47 @@ class TowerPlacement(Study):
         """The broadcast file of nav='auto'."""
         return (c.NAV_FILE,) if params["nav"] == "auto" else ()
 
-    def run(self, params, realizations, seed, progress):
+    def run_units(self, params, realizations, seed, progress, checkpoint):
         """Random placements, gradient descent from the best of them, greedy + swap and
-        exhaustive selection among the candidates, refinement; maps for the figures."""
+        exhaustive selection among the candidates, refinement; maps for the figures. Units
+        (``checkpoint``): the random baseline, each start, greedy, exhaustive, refinement,
+        maps."""
         from oaraim.studies.tower_placement_report import finish, median_index
 
         sky = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         prob = Problem(params, sky)
+        unit = functools.partial(counted_unit, checkpoint, prob)
         key = jax.random.key(int(seed))
         box, h_t, n_t = params["box_half_m"], params["tower_h_m"], params["n_towers"]
         xy = np.asarray(jax.random.uniform(mc.stream(key, "placement_random"),
                                            (realizations, n_t, 2), minval=-box, maxval=box))
         rand = np.concatenate([xy, np.full((realizations, n_t, 1), h_t)], -1)
-        q_rand = prob.objective(rand)
+        q_rand = unit("random", lambda: prob.objective(rand))
         _advance(progress, realizations // 2)
         runs = []
-        for i in np.argsort(q_rand, kind="stable")[:params["starts"]]:
-            runs.append(descend(prob, rand[i], params["iterations"], params["step_m"],
-                                -box, box))
+        for k, i in enumerate(np.argsort(q_rand, kind="stable")[:params["starts"]]):
+            runs.append(unit(f"start{k:02d}", lambda i=i: descend(
+                prob, rand[i], params["iterations"], params["step_m"], -box, box)))
         free = min(runs, key=lambda r: r[1])
         sites = self.sites(params, key)
-        greedy, q_greedy, swaps = greedy_swap(prob, sites, params["n_select"])
-        exh = exhaustive(prob, sites, params["n_select"], params["exhaustive_limit"])
+        greedy, q_greedy, swaps = unit("greedy", lambda: greedy_swap(prob, sites,
+                                                                     params["n_select"]))
+        exh = unit("exhaustive", lambda: exhaustive(prob, sites, params["n_select"],
+                                                    params["exhaustive_limit"]))
         lo = sites[greedy][:, :2] - params["refine_radius_m"]
         hi = sites[greedy][:, :2] + params["refine_radius_m"]
-        refined = descend(prob, sites[greedy], params["iterations"],
-                          min(params["step_m"], max(params["refine_radius_m"], 1e-3)) / 2,
-                          np.maximum(lo, -box), np.minimum(hi, box))
+        refined = unit("refine", lambda: descend(
+            prob, sites[greedy], params["iterations"],
+            min(params["step_m"], max(params["refine_radius_m"], 1e-3)) / 2,
+            np.maximum(lo, -box), np.minimum(hi, box)))
         _advance(progress, realizations - realizations // 2)
         none = np.zeros((n_t, 3)), np.zeros(n_t, bool)
-        maps = {"gps_only": prob.hpl_map(*none, box),
-                "random_median": prob.hpl_map(rand[median_index(q_rand)],
-                                              np.ones(n_t, bool), box),
-                "optimised": prob.hpl_map(free[0], np.ones(n_t, bool), box)}
-        q_gps = float(prob.score(prob.hpls(none[0][None], none[1][None]))[0])
+        every = np.ones(n_t, bool)
+        maps, q_gps = unit("maps", lambda: (
+            {"gps_only": prob.hpl_map(*none, box),
+             "random_median": prob.hpl_map(rand[median_index(q_rand)], every, box),
+             "optimised": prob.hpl_map(free[0], every, box)},
+            float(prob.score(prob.hpls(none[0][None], none[1][None]))[0])))
         return finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
                       swaps, exh, refined, maps, q_gps)
 
@@ -449,6 +456,20 @@ class TowerPlacement(Study):
         from oaraim.studies.tower_placement_report import plot
 
         return plot(xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False), out_dir)
+
+
+def counted_unit(checkpoint, problem, name, compute):
+    """``checkpoint.unit(name, compute)`` that also restores the evaluations the unit cost
+    (``problem.evaluations``, a metric of the run) when it is read back instead of computed."""
+    before = problem.evaluations
+
+    def run():
+        value = compute()
+        return {"value": value, "evaluations": problem.evaluations - before}
+
+    out = checkpoint.unit(name, run)
+    problem.evaluations = before + int(out["evaluations"])
+    return out["value"]
 
 
 def _advance(progress, n):

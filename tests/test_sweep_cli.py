@@ -203,7 +203,7 @@ def test_two_worker_local_dask_cluster_is_bit_identical_to_in_process(tmp_path, 
 
 
 @pytest.mark.parametrize("args, words", [
-    (["seed001-fig3-elevation", "--resume"], ["sweep studies", "seed001-fig3-elevation"]),
+    (["seed001-fig3-elevation", "--resume"], ["resumable studies", "seed001-fig3-elevation"]),
     (["seed001-fig3-elevation", "--workers", "2"], ["sweep studies"]),
     (["toy-sweep", "--workers", "0"], ["--workers", ">= 1"]),
     (["toy-sweep", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], ["not both"]),
