@@ -333,8 +333,10 @@ def _int_weighted_modes_jvp(fault_modes, max_order, single_downdates, primals, t
     g_centred, inv_s = mode_centering(g_rows, w, memf)
     ds, d_var = wls_tangents(s_pos, w, g_centred, inv_s, memf, jnp.moveaxis(dg, 1, 0),
                              jnp.where(keep, dw_int[None], 0.0))
-    ds = jnp.where(nonsingular[:, None, None], ds, 0.0)
     d_bias, d_ss = separation_tangents(s_pos, sigma_ss, ds, b_nom, var_acc, db_nom, dvar_acc)
+    # (ds is already 0 where a mode's S was set to 0; the mask covers the single modes of a
+    # singular all-in-view solution, whose S is kept)
+    ds = jnp.where(nonsingular[:, None, None], jnp.stack(ds, axis=1), 0.0)
     return out, (ds, d_var, d_bias, d_ss, np.zeros(nonsingular.shape, jax.dtypes.float0))
 
 

@@ -84,7 +84,8 @@ def wls_tangents(s_pos, w, g_centred, inv_s, memf, dg_rows, dw):
     s_pos (K, 3, L, B) the modes' position rows S (0 at excluded sources); w (K, L, B) the
     modes' weights; g_centred, inv_s from ``mode_centering``; memf (L, C, B); dg_rows
     (3, L, B) the tangent of the rows' components; dw (K, L, B) that of the modes' weights.
-    Returns dS (K, 3, L, B) and dsigma^2 (K, 3, B); linear in (dg_rows, dw).
+    Returns dS (a list of the 3 components' (K, L, B) tangents) and dsigma^2 (K, 3, B);
+    linear in (dg_rows, dw).
 
     Written component by component ((K, L, B) arrays, the 3 x 3 products unrolled) with the
     sums over sources as reductions: its transpose (reverse mode) is then broadcasts and the
@@ -99,7 +100,8 @@ def wls_tangents(s_pos, w, g_centred, inv_s, memf, dg_rows, dw):
     for a in range(3):
         for b in range(a + 1):
             m_inv[a][b] = m_inv[b][a] = linalg.materialize(_over_sources(s_pos[:, a] * u[b]))
-    dg = [dg_rows[a][None] for a in range(3)]
+    # broadcast over the modes once: each broadcast is a sum over the modes in reverse mode
+    dg = [jnp.broadcast_to(dg_rows[a][None], w.shape) for a in range(3)]
     wdg = [w * x for x in dg]
     dwg = [dw * x for x in gt]
     # Z = D + D^T + sum_m dw_m g~_m g~_m^T (symmetric), D = sum_m w_m dg_m g~_m^T
@@ -113,17 +115,21 @@ def wls_tangents(s_pos, w, g_centred, inv_s, memf, dg_rows, dw):
     ds = [w * sum(m_inv[a][b] * inner[b] for b in range(3)) + dw * u[a] for a in range(3)]
     d_var = [-sum(m_inv[a][b] * z_mat[b][c] * m_inv[c][a] for b in range(3) for c in range(3))
              for a in range(3)]
-    return jnp.stack(ds, axis=1), jnp.concatenate(d_var, axis=1)
+    return ds, jnp.concatenate(d_var, axis=1)
 
 
 def separation_tangents(s_pos, sigma_ss, ds, b_nom, var_acc, db_nom, dvar_acc):
-    """The tangents of eqs. (10) and (11) from the rows' tangent ``ds`` (K, 3, L, B), mode 0
-    the all-in-view solution: b_q^(i) = sum_l |S_ql| b_l and sigma_ss,q^(i) =
-    sqrt(sum_l (S^(i) - S^(0))_ql^2 C_acc,l) (derivative 0 where it is 0, as ``linalg.sqrt0``).
-    b_nom, var_acc, their tangents (L, B). Returns (dbias, dsigma_ss), (K, 3, B) each."""
+    """The tangents of eqs. (10) and (11) from the rows' tangents ``ds`` (``wls_tangents``: 3
+    (K, L, B) arrays), mode 0 the all-in-view solution: b_q^(i) = sum_l |S_ql| b_l and
+    sigma_ss,q^(i) = sqrt(sum_l (S^(i) - S^(0))_ql^2 C_acc,l) (derivative 0 where it is 0, as
+    ``linalg.sqrt0``). b_nom, var_acc, their tangents (L, B). Returns (dbias, dsigma_ss),
+    (K, 3, B) each."""
+    shape = ds[0].shape
+    # broadcast over the modes once (one sum over the modes each in reverse mode)
+    db_nom, dvar_acc = (jnp.broadcast_to(x[None], shape) for x in (db_nom, dvar_acc))
     d_bias, d_ss = [], []
     for a in range(3):
-        rows, d_rows = s_pos[:, a], ds[:, a]
+        rows, d_rows = s_pos[:, a], ds[a]
         d_bias.append(_over_sources(jnp.sign(rows) * b_nom * d_rows
                                     + jnp.abs(rows) * db_nom)[:, 0])
         sep = rows - rows[:1]
