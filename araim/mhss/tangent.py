@@ -51,10 +51,10 @@ def mode_centering(g_rows, w, memf):
     inv_s = 0.0
     for c in range(memf.shape[1]):
         wc = w * memf[:, c]
-        inv_c = linalg.materialize(_safe_inverse(_over_sources(wc)))
+        inv_c = linalg.materialize(_safe_inverse(_summed_over_sources(wc)))
         for a in range(3):
             g_centred[a] = g_centred[a] - memf[:, c] * linalg.materialize(
-                _over_sources(wc * g_rows[a]) * inv_c)
+                _summed_over_sources(wc * g_rows[a]) * inv_c)
         inv_s = inv_s + memf[:, c] * inv_c
     return [linalg.materialize(x) for x in g_centred], linalg.materialize(inv_s)
 
@@ -69,6 +69,14 @@ def _stored(x, one):
 def _over_sources(x):
     """sum over the source axis (1) of a (K, L, B) array, kept as (K, 1, B)."""
     return jnp.sum(x, axis=1, keepdims=True)
+
+
+def _summed_over_sources(x):
+    """The same sum as ``_over_sources`` for a value that is not a tangent, written out
+    source by source (``linalg.sum_axis``: XLA vectorises it along the batch axis; a
+    reduction over a non-minor axis ran several times slower). Not for tangents: the
+    transpose of its slices is a pad of the whole array each."""
+    return linalg.sum_axis(x, 1)[:, None]
 
 
 def _own_constellation_sum(x, memf, one):
@@ -99,7 +107,8 @@ def wls_tangents(s_pos, w, g_centred, inv_s, memf, dg_rows, dw):
     m_inv = [[None] * 3 for _ in range(3)]
     for a in range(3):
         for b in range(a + 1):
-            m_inv[a][b] = m_inv[b][a] = linalg.materialize(_over_sources(s_pos[:, a] * u[b]))
+            m_inv[a][b] = m_inv[b][a] = linalg.materialize(
+                _summed_over_sources(s_pos[:, a] * u[b]))
     # broadcast over the modes once: each broadcast is a sum over the modes in reverse mode
     dg = [jnp.broadcast_to(dg_rows[a][None], w.shape) for a in range(3)]
     wdg = [w * x for x in dg]
