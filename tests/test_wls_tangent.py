@@ -7,8 +7,9 @@ function (Cholesky factors, rank-one downdates), which JAX differentiates step b
 directions (``jax.jvp`` and ``jax.vjp``) of the two must agree to 1e-10, relative to the
 largest entry of each output, on random geometries: the bench sky with the towers lifted off
 the receiver's height (so that no mode is exactly singular), at orders 1 and 2 (the order-2
-modes of a source and a constellation are the Cholesky ones), and the all-Cholesky path. Modes that are singular carry no derivative downstream
-(``projection._finish`` masks them), so they are left out of the comparison.
+modes of a source and a constellation are the Cholesky ones), and the all-Cholesky path.
+Modes that are singular carry no derivative downstream (``projection._finish`` masks them),
+so they are left out of the comparison.
 """
 
 import jax
