@@ -8,9 +8,10 @@ line-of-sight rows, both variances, b_nom, P_s and P_const), which, the geometri
 independent, is every geometry's HPL and its gradient; taken per chunk of 128 geometries
 inside a ``lax.map`` over the chunks (the pattern docs/gradients.md recommends for large
 batches). The PL roots are differentiated by the implicit function theorem
-(``araim.mhss.implicit``), so the gradient costs a reverse pass through the projection and
-two evaluations of the risk terms, not the root finder's iterations. The goal of issue 27:
-the gradient at most 3x the cost of the value.
+(``araim.mhss.implicit``) and the fault modes' least squares by their closed-form tangent
+(``araim.mhss.tangent``), so the gradient costs the transposed rules and two evaluations of
+the risk terms, not the root finder's iterations nor a replay of the factorisations. The
+goal of issue 27: the gradient at most 3x the cost of the value (docs/gradients.md).
 """
 
 import time

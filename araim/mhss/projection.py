@@ -39,6 +39,7 @@ from oaraim.araim.fault_modes import (
     template_source,
 )
 from oaraim.araim.mhss.inputs import invalid_input_flags
+from oaraim.araim.mhss.tangent import mode_centering, separation_tangents, wls_tangents
 from oaraim.araim.position_opt import adjusted_rows
 from oaraim.araim.status import Status
 
@@ -262,6 +263,83 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     return s_pos, var_pos, bias, sigma_ss, ok
 
 
+def _int_weighted_modes(g, w_int, var_acc, b_nom, valid, member, excluded, fault_modes,
+                        max_order, single_downdates):
+    """Every mode's solution with C_int^-1 weights (mode 0 the all-in-view one), in template
+    order: g (L, 3, B), zero at padding; w_int, var_acc, b_nom (L, B), zero at padding; valid
+    (L, B); member (L, C, B); excluded (T, L, B) the candidate modes' exclusions
+    (``select_fault_modes``). ``single_downdates``: the all-in-view and whole-constellation
+    modes on clock-eliminated rows, the single-source modes by downdates, the others by their
+    own Cholesky; else every mode by its own Cholesky. Returns s_pos (K, 3, L, B), var_pos,
+    bias, sigma_ss (K, 3, B) and nonsingular (K, B). Differentiated by ``tangent``'s rule
+    (``int_weighted_modes``), not through these steps."""
+    L, C = valid.shape[0], member.shape[1]
+    cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
+    cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
+    if not single_downdates:
+        keep = jnp.concatenate([valid[None], valid[None] & ~excluded], axis=0)  # (K, L, B)
+        return _generic_modes(keep, w_int, cols, member, b_nom, var_acc, None)
+    # the all-in-view solution and the whole-constellation modes on clock-eliminated rows,
+    # the singles by downdates of the all-in-view inverse, other modes (a source and
+    # whole constellations, order >= 2) by their own Cholesky; assembled in template order
+    src = template_source(fault_modes, L, C, max_order)
+    rest = np.arange(L, src.size)
+    whole = rest[src[rest] < 0]
+    gt, inv_s_src = _centered_rows(g, w_int, member)
+    keep = jnp.concatenate([valid[None], valid[None] & ~excluded[whole]], axis=0)
+    sw, vw, bw, ssw, okw, inv = _whole_modes(keep, w_int, gt, b_nom, var_acc)
+    s1, v1, b1, ss1, ok1 = _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc,
+                                         [[e[0] for e in row] for row in inv], vw[0])
+    parts = {True: (sw, vw, bw, ssw, okw)}
+    if whole.size < rest.size:
+        parts[False] = _generic_modes(valid[None] & ~excluded[rest[src[rest] >= 0]],
+                                      w_int, cols, member, b_nom, var_acc, sw[0])
+    runs, next_index = [], {True: 1, False: 0}  # [kind, start, stop] in parts[kind]
+    for is_whole in src[rest] < 0:
+        k = next_index[bool(is_whole)]
+        next_index[bool(is_whole)] += 1
+        if runs and runs[-1][0] == is_whole and runs[-1][2] == k:
+            runs[-1][2] = k + 1
+        else:
+            runs.append([bool(is_whole), k, k + 1])
+
+    def modes(field, aiv, singles):
+        return [aiv, singles] + [parts[kind][field][a:b] for kind, a, b in runs]
+
+    s_pos = jnp.concatenate(modes(0, sw[:1], s1), axis=0)
+    var_pos = _blocks(modes(1, vw[:1], v1))
+    bias = _blocks(modes(2, bw[:1], b1))
+    sigma_ss = _blocks(modes(3, jnp.zeros_like(ssw[:1]), ss1))
+    nonsingular = jnp.concatenate(modes(4, okw[:1], ok1 & okw[0][None]), axis=0)
+    return s_pos, var_pos, bias, sigma_ss, nonsingular
+
+
+int_weighted_modes = jax.custom_jvp(_int_weighted_modes, nondiff_argnums=(7, 8, 9))
+
+
+@int_weighted_modes.defjvp
+def _int_weighted_modes_jvp(fault_modes, max_order, single_downdates, primals, tangents):
+    """The rule of ``tangent`` on the outputs of ``_int_weighted_modes`` (which it calls
+    through ``int_weighted_modes``, so that the rule's own coefficients are differentiable
+    again): the value is unchanged, bit for bit."""
+    g, w_int, var_acc, b_nom, valid, member, excluded = primals
+    dg, dw_int, dvar_acc, db_nom = tangents[:4]
+    out = int_weighted_modes(*primals, fault_modes, max_order, single_downdates)
+    s_pos, _, _, sigma_ss, nonsingular = out
+    keep = jnp.concatenate([valid[None], valid[None] & ~excluded], axis=0)  # (K, L, B)
+    w = jnp.where(keep, w_int[None], 0.0)
+    memf = member.astype(g.dtype)
+    g_rows = jnp.moveaxis(g, 1, 0)
+    g_centred, inv_s = mode_centering(g_rows, w, memf)
+    ds, d_var = wls_tangents(s_pos, w, g_centred, inv_s, memf, jnp.moveaxis(dg, 1, 0),
+                             jnp.where(keep, dw_int[None], 0.0))
+    d_bias, d_ss = separation_tangents(s_pos, sigma_ss, ds, b_nom, var_acc, db_nom, dvar_acc)
+    # (ds is already 0 where a mode's S was set to 0; the mask covers the single modes of a
+    # singular all-in-view solution, whose S is kept)
+    ds = jnp.where(nonsingular[:, None, None], jnp.stack(ds, axis=1), 0.0)
+    return out, (ds, d_var, d_bias, d_ss, np.zeros(nonsingular.shape, jax.dtypes.float0))
+
+
 def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
              max_order, all_in_view_weighting, single_downdates=True, input_flags=False,
              fault_modes: FaultModeRule = DEFAULT_RULE):
@@ -271,7 +349,6 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
     ``input_flags``: returns (Projection, ``invalid_input_flags``) instead. ``fault_modes``: the
     convention (``araim.FaultModeRule``)."""
     C = p_const.shape[0]
-    L = valid.shape[0]
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
     # fused consumer reads them with a stride
     g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
@@ -291,61 +368,30 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
     b_nom = linalg.materialize(jnp.where(valid, b_nom, 0.0))
     member = linalg.materialize(
         valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None]))
-    cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
-    cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
-
-    if single_downdates and all_in_view_weighting == "int":
-        # the all-in-view solution and the whole-constellation modes on clock-eliminated rows,
-        # the singles by downdates of the all-in-view inverse, other modes (a source and
-        # whole constellations, order >= 2) by their own Cholesky; assembled in template order
-        src = template_source(fault_modes, L, C, max_order)
-        rest = np.arange(L, src.size)
-        whole = rest[src[rest] < 0]
-        gt, inv_s_src = _centered_rows(g, w_int, member)
-        keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded[whole]], axis=0)
-        sw, vw, bw, ssw, okw, inv = _whole_modes(keep, w_int, gt, b_nom, var_acc)
-        s1, v1, b1, ss1, ok1 = _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc,
-                                             [[e[0] for e in row] for row in inv], vw[0])
-        parts = {True: (sw, vw, bw, ssw, okw)}
-        if whole.size < rest.size:
-            parts[False] = _generic_modes(valid[None] & ~fm.excluded[rest[src[rest] >= 0]],
-                                          w_int, cols, member, b_nom, var_acc, sw[0])
-        runs, next_index = [], {True: 1, False: 0}  # [kind, start, stop] in parts[kind]
-        for is_whole in src[rest] < 0:
-            k = next_index[bool(is_whole)]
-            next_index[bool(is_whole)] += 1
-            if runs and runs[-1][0] == is_whole and runs[-1][2] == k:
-                runs[-1][2] = k + 1
-            else:
-                runs.append([bool(is_whole), k, k + 1])
-
-        def modes(field, aiv, singles):
-            return [aiv, singles] + [parts[kind][field][a:b] for kind, a, b in runs]
-
-        s_pos = jnp.concatenate(modes(0, sw[:1], s1), axis=0)
-        var_pos = _blocks(modes(1, vw[:1], v1))
-        bias = _blocks(modes(2, bw[:1], b1))
-        sigma_ss = _blocks(modes(3, jnp.zeros_like(ssw[:1]), ss1))
-        nonsingular = jnp.concatenate(modes(4, okw[:1], ok1 & okw[0][None]), axis=0)
+    if all_in_view_weighting == "int":
+        s_pos, var_pos, bias, sigma_ss, nonsingular = int_weighted_modes(
+            g, w_int, var_acc, b_nom, valid, member, fm.excluded, fault_modes, max_order,
+            single_downdates)
     else:
+        cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
+        cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
         keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
         s_pos, var_pos, bias, sigma_ss, nonsingular = _generic_modes(
             keep, w_int, cols, member, b_nom, var_acc, None)
-        if all_in_view_weighting == "acc":
-            w_acc = linalg.inverse_variance_weights(
-                jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
-            s0, _, b0, _, ok0 = _generic_modes(
-                valid[None], w_acc, cols, member, b_nom, var_acc, None)
-            # seed 004 after eq. 5: S^(0) weighted by C_acc^-1; its integrity sigma is
-            # sqrt(S^(0) C_int S^(0)T)_qq
-            var0 = jnp.sum(s0[0] ** 2 * var_int[None], axis=1)
-            s_pos = s_pos.at[0].set(s0[0])
-            var_pos = var_pos.at[0].set(var0)
-            bias = bias.at[0].set(b0[0])
-            nonsingular = nonsingular.at[0].set(ok0[0])
-            sigma_ss = linalg.sqrt0(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None],
-                                              axis=2))
-            sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
+        w_acc = linalg.inverse_variance_weights(
+            jnp.sqrt(jnp.where(valid, var_acc, 1.0)), valid)
+        s0, _, b0, _, ok0 = _generic_modes(
+            valid[None], w_acc, cols, member, b_nom, var_acc, None)
+        # seed 004 after eq. 5: S^(0) weighted by C_acc^-1; its integrity sigma is
+        # sqrt(S^(0) C_int S^(0)T)_qq
+        var0 = jnp.sum(s0[0] ** 2 * var_int[None], axis=1)
+        s_pos = s_pos.at[0].set(s0[0])
+        var_pos = var_pos.at[0].set(var0)
+        bias = bias.at[0].set(b0[0])
+        nonsingular = nonsingular.at[0].set(ok0[0])
+        sigma_ss = linalg.sqrt0(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None],
+                                          axis=2))
+        sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
     pr = _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
                  budget, g.dtype, flags)
     return (pr, flags) if input_flags else pr
