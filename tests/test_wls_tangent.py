@@ -9,7 +9,8 @@ the rule's ``jax.vjp`` must be the transpose of its jvp (the adjoint identity, t
 random geometries: the bench sky with the towers lifted off the receiver's height (so that no
 mode is exactly singular), at orders 1 and 2 (the order-2 modes of a source and a
 constellation are the Cholesky ones), and the all-Cholesky path. Modes that are singular
-carry no derivative downstream (``projection._finish`` masks them), so they are left out of the comparison.
+carry no derivative downstream (``projection._finish`` masks them), so they are left out of
+the comparison.
 """
 
 import jax

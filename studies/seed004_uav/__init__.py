@@ -25,8 +25,9 @@ Setup:
     b_nom, troposphere residual, 2x the ADD airborne multipath, white noise), towers
     ``sim.sop_errors`` (``sim.ErrorModel()`` with thermal noise ``sigma_pr_m``: multipath,
     NLOS episodes at ``nlos_rate_per_s``, 0 by default: an aircraft above the roofs sees the
-    towers in line of sight; each tower's epsilon_n and its operator's common clock term, seed 004 eq. 3;
-    the clocks fitted over a 300 s GNSS period before take-off, seed 000 II-D), drawn from the
+    towers in line of sight; each tower's epsilon_n and its operator's common clock term,
+    seed 004 eq. 3; the clocks fitted over the whole 300 s GNSS period before take-off
+    (``calib_window_s``), seed 000 II-D), drawn from the
     flight's key fold_in(key(seed), 0); ``world_errors``. The PL keeps its own model (GPS
     sigma_URA 1 m with the ADD terms, SOP sigma_URA^S = 3 m, the seed's semi-urban value of
     VII-D: not estimated from the data). ``--set world=clean`` is the study before the error
