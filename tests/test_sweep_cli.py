@@ -183,7 +183,7 @@ def test_docs_do_not_promise_narrowing_on_resume():
     for line in readme.splitlines():
         if "--resume" in line and "--set" in line:
             raise AssertionError(f"README shows --resume with a changed grid: {line}")
-    assert "continue a killed sweep (same parameters)" in readme
+    assert "continue a killed run (same parameters)" in readme
     assert "a narrowed or changed grid is a new run" in " ".join(sweeps.split())
 
 
