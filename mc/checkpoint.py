@@ -21,7 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from oaraim.mc.store import git_commit, package_versions
-from oaraim.mc.sweep_store import differences, normalized, write_atomic
+from oaraim.mc.sweep_store import (
+    differences,
+    normalized,
+    read_json_or_none,
+    remove_partial_writes,
+    write_atomic,
+)
 
 FORMAT_VERSION = 1
 IDENTITY = "identity.json"
@@ -123,16 +129,9 @@ class Checkpoint:
         self.computed = 0
         self.reused = 0
         self.folder.mkdir(parents=True, exist_ok=True)
-        for f in self.folder.iterdir():  # half-written files of a killed run
-            if f.name.endswith(".tmp"):
-                f.unlink(missing_ok=True)
+        remove_partial_writes(self.folder)
         path = self.folder / IDENTITY
-        old = None
-        if path.exists():
-            try:
-                old = json.loads(path.read_text())
-            except (OSError, ValueError):
-                old = None
+        old = read_json_or_none(path)
         units = [f for f in self.folder.iterdir() if f.suffix == ".npz"]
         if resume and units:
             if old is None:

@@ -32,6 +32,23 @@ def write_atomic(path: Path, data: bytes):
     os.replace(tmp, path)
 
 
+def remove_partial_writes(folder: Path):
+    """Delete the temporary files of ``write_atomic`` that a killed run left in ``folder``."""
+    for f in folder.iterdir():
+        if f.name.endswith(".tmp"):
+            f.unlink(missing_ok=True)
+
+
+def read_json_or_none(path: Path):
+    """The JSON in ``path`` (a manifest, an identity), or None if it is missing or unreadable."""
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def chunk_name(cell_hash, b0, nblocks):
     """File name of the chunk of blocks ``b0 .. b0 + nblocks - 1`` of one cell."""
     return f"{cell_hash}_{b0:010d}_{nblocks:06d}.npz"
@@ -93,15 +110,8 @@ def prepare_out_dir(out_dir: Path, manifest: dict, resume: bool):
     chunk_dir = out_dir / CHUNK_DIR
     chunk_dir.mkdir(parents=True, exist_ok=True)
     mpath = out_dir / MANIFEST
-    old = None
-    if mpath.exists():
-        try:
-            old = json.loads(mpath.read_text())
-        except (OSError, ValueError):
-            old = None
-    for f in chunk_dir.iterdir():  # half-written files of a killed run
-        if f.name.endswith(".tmp"):
-            f.unlink(missing_ok=True)
+    old = read_json_or_none(mpath)
+    remove_partial_writes(chunk_dir)
     if resume:
         has_chunks = any(CHUNK_RE.match(f.name) for f in chunk_dir.iterdir())
         if old is None and has_chunks:
