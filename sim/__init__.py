@@ -31,6 +31,7 @@ from oaraim.sim.gnss import (
     GnssErrorModel,
     epoch_times,
     gnss_errors,
+    gnss_sop_errors,
     pseudoranges,
     scenario_geometry,
     to_recording,
@@ -60,11 +61,11 @@ from oaraim.sim.trajectory import (
 )
 
 __all__ = [
-    "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel",
-    "GnssErrorModel", "InitialDraw", "SCENARIOS", "Scenario", "Segment", "Trajectory",
-    "WorldState", "calibrate", "clock_fit", "drive", "drive_epoch", "drive_seed000",
-    "drive_seed002", "drive_setup", "epoch_times", "example_recording", "fault_bias_m", "gnss",
-    "gnss_errors", "initial_draw", "measurement", "monte_carlo_drive", "pseudorange_from_range",
+    "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel", "GnssErrorModel",
+    "InitialDraw", "SCENARIOS", "Scenario", "Segment", "Trajectory", "WorldState", "calibrate",
+    "clock_fit", "drive", "drive_epoch", "drive_seed000", "drive_seed002", "drive_setup",
+    "epoch_times", "example_recording", "fault_bias_m", "gnss", "gnss_errors", "gnss_sop_errors",
+    "initial_draw", "measurement", "monte_carlo_drive", "pseudorange_from_range",
     "pseudorange_sample", "pseudorange_true", "pseudoranges", "recordings", "scenario_geometry",
     "simulate_drive", "sop_errors", "synthesize_recording", "to_recording", "trajectory",
     "uav_seed004",

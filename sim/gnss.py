@@ -47,7 +47,12 @@ from oaraim.geometry.recording import (
 )
 from oaraim.geometry.sky import look_angles, satellites
 from oaraim.mc import stream
-from oaraim.sim.measurement import gauss_markov_step, pseudorange_from_range
+from oaraim.sim.measurement import (
+    ErrorModel,
+    gauss_markov_step,
+    pseudorange_from_range,
+    sop_errors,
+)
 from oaraim.sim.trajectory import Scenario
 
 #: synthesized receiver clock (illustrative: a 1 km offset and a 0.3 m/s drift)
@@ -121,6 +126,21 @@ def gnss_errors(key, t_s, el_rad, sigma_ura_m, gm: GnssErrorModel):
 
     _, y = jax.lax.scan(body, x0, (jnp.arange(n_t), dts, el_rad))
     return y
+
+
+def gnss_sop_errors(key, t_s, el_rad, is_gps, sigma_ura_gps_m, err: ErrorModel, t_cal_s,
+                    operator=None, gm: GnssErrorModel | None = None):
+    """Pseudorange errors (T, L) of a GNSS + SOP scenario in the realistic world, and the SOPs'
+    empirical sigma of the GNSS period (m): ``gnss_errors`` (``gm``, ``sigma_ura_gps_m``) on
+    the GNSS columns (``is_gps``, a static (L,) bool), ``sop_errors`` (``err``, the GNSS period
+    ``t_cal_s``, towers' ``operator``) on the others in column order, both from ``key``
+    (``gm`` None: ``GnssErrorModel()``). jit-safe."""
+    gm = GnssErrorModel() if gm is None else gm
+    is_gps = np.asarray(is_gps, bool)
+    towers = np.flatnonzero(~is_gps)
+    g = gnss_errors(key, t_s, el_rad, sigma_ura_gps_m, gm)
+    sop, sigma_m = sop_errors(key, err, t_s, towers.size, t_cal_s, operator)
+    return g.at[:, towers].set(sop), sigma_m
 
 
 def epoch_times(duration_s, n_epochs):

@@ -53,6 +53,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
+from oaraim.studies.common.params import parse_world
 from oaraim.studies.common.seed004 import NAV, NAV_FILE, resolve_sky
 
 PUBLISHED_HPL_GPS_M = 15.01
@@ -63,33 +64,21 @@ BLOCK_ROWS = 4096
 DRIVES = {"seed000-drive": "drive_seed000", "seed002-drive": "drive_seed002"}
 
 
-def parse_world(name, v):
-    """Parser of the ``world`` parameter: 'realistic' or 'clean'."""
-    v = str(v).strip().lower()
-    if v not in ("realistic", "clean"):
-        raise ValueError(f"{name} must be 'realistic' or 'clean', got {v!r}")
-    return v
-
-
 def world_noise_fn(geom, params, seed):
     """A jitted function of draw indices (k,) -> (errors (k, T, L) m, LTE sigma (k,) m) of the
-    realistic world: ``sim.gnss_errors`` on the GPS columns, ``sim.measurement.sop_errors``
-    on the tower columns (GNSS period of 300 s at 1 Hz before t = 0), from the draw's key
-    fold_in(key(seed), i)."""
+    realistic world (``sim.gnss_sop_errors``: GNSS period of 300 s at 1 Hz before t = 0), from
+    the draw's key fold_in(key(seed), i)."""
     seed_key = jax.random.key(int(seed))
     t = jnp.asarray(geom.t_s)
     el = jnp.asarray(geom.el_rad)
     is_gps = np.asarray(geom.is_gps)
-    n_tw = int((~is_gps).sum())
     err = sim.ErrorModel(sigma_pr_m=params["sigma_lte_noise_m"], fault_onset_s=np.inf,
                          fault_bias_m=0.0)
     t_cal = -jnp.arange(300)[::-1] * 1.0
 
     def one(i):
-        k = jax.random.fold_in(seed_key, i)
-        g = sim.gnss_errors(k, t, el, params["sigma_ura_gps_m"], sim.GnssErrorModel())
-        lte, sig = sim.measurement.sop_errors(k, err, t, n_tw, t_cal)
-        return jnp.where(jnp.asarray(is_gps), g, jnp.pad(lte, ((0, 0), (is_gps.sum(), 0)))), sig
+        return sim.gnss_sop_errors(jax.random.fold_in(seed_key, i), t, el, is_gps,
+                                   params["sigma_ura_gps_m"], err, t_cal)
 
     return jax.jit(jax.vmap(one))
 

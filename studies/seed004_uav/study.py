@@ -134,11 +134,12 @@ def draw_noise(geom, seed, sigma_ura_gps_m, sigma_lte_m):
 def world_errors(geom, params, seed):
     """Errors (T, L) m of the realistic world (docs/error-world.md) along the flight, and the
     empirical LTE sigma of its GNSS period (m; the PL does not use it: sigma_URA^S is the
-    seed's 3 m). GPS columns: ``sim.gnss_errors`` with ``sim.GnssErrorModel()`` at the study's
-    sigma_URA; tower columns: ``sim.sop_errors`` in ``sim.ErrorModel()`` with thermal noise
-    ``sigma_pr_m`` and no fault of its own, each tower's operator its common clock term (seed
-    004 eq. 3), the clocks fitted over a GNSS period of ``GNSS_PERIOD_EPOCHS`` s at 1 Hz
-    before take-off (seed 000 II-D). The flight is draw 0: key fold_in(key(seed), 0)."""
+    seed's 3 m), by ``sim.gnss_sop_errors``. GPS columns: ``sim.gnss_errors`` with
+    ``sim.GnssErrorModel()`` at the study's sigma_URA; tower columns: ``sim.sop_errors`` in
+    ``sim.ErrorModel()`` with thermal noise ``sigma_pr_m`` and no fault of its own, each
+    tower's operator its common clock term (seed 004 eq. 3), the clocks fitted over a GNSS
+    period of ``GNSS_PERIOD_EPOCHS`` s at 1 Hz before take-off (seed 000 II-D). The flight is
+    draw 0: key fold_in(key(seed), 0)."""
     key = jax.random.fold_in(jax.random.key(int(seed)), 0)
     tw = np.flatnonzero(~geom.is_gps)
     operator = labels(geom)[0][tw] - 1  # 0 = the first operator (labels: GPS is 0)
@@ -147,12 +148,10 @@ def world_errors(geom, params, seed):
                            calib_window_s=params["calib_window_s"])
     t_s = jnp.asarray(geom.t_s)
     t_cal_s = -jnp.arange(GNSS_PERIOD_EPOCHS, dtype=t_s.dtype)[::-1]
-    gps = np.asarray(sim.gnss_errors(key, t_s, jnp.asarray(geom.el_rad),
-                                     params["sigma_ura_gps_m"], sim.GnssErrorModel()))
-    sop, sigma_emp_m = sim.sop_errors(key, world, t_s, tw.size, t_cal_s, jnp.asarray(operator))
-    err = np.array(gps, copy=True)
-    err[:, tw] = np.asarray(sop)
-    return np.where(geom.valid, err, 0.0), float(sigma_emp_m)
+    err, sigma_emp_m = sim.gnss_sop_errors(key, t_s, jnp.asarray(geom.el_rad), geom.is_gps,
+                                           params["sigma_ura_gps_m"], world, t_cal_s,
+                                           jnp.asarray(operator))
+    return np.where(geom.valid, np.asarray(err), 0.0), float(sigma_emp_m)
 
 
 def error_rms(geom, pr, n_t, recorded):
