@@ -55,14 +55,6 @@ def parse_dof(name, v):
                      f"000's text), got {v!r}")
 
 
-def parse_world(name, v):
-    """The error world: 'realistic' (``sim.ErrorModel()``) or 'clean' (``ErrorModel.clean``)."""
-    s = str(v).strip().lower()
-    if s not in ("realistic", "clean"):
-        raise ValueError(f"{name} must be 'realistic' or 'clean', got {v!r}")
-    return s
-
-
 def world_of(p, mp_sigma_m=None, mp_tau_s=None):
     """The ``sim.ErrorModel`` of the study parameters ``p`` (multipath replaced where given:
     the sensitivity runs)."""
@@ -115,9 +107,10 @@ class EkfDriveStudy(Study):
         self._scenario = None
         w = sim.ErrorModel()
         self.params = {
-            "world": Param("realistic", parse_world, "error world: 'realistic' (sim.ErrorModel "
-                           "defaults, docs/error-world.md) or 'clean' (white noise, no "
-                           "multipath/NLOS/clock residual, filter told the truth's sigma)"),
+            "world": Param("realistic", shared.parse_world, "error world: 'realistic' "
+                           "(sim.ErrorModel defaults, docs/error-world.md) or 'clean' (white "
+                           "noise, no multipath/NLOS/clock residual, filter told the truth's "
+                           "sigma)"),
             "sigma_pr_m": Param(w.sigma_pr_m, positive, "LTE thermal (white) pseudorange "
                                 "noise of the truth (seed 000: 'meter-level'; open)", "m"),
             "filter_sigma_pr_m": Param(0.0, non_negative, "pseudorange sigma of the filter "
@@ -311,13 +304,8 @@ class EkfDriveStudy(Study):
             mred = _pct_reduction(mx[:, 0], mx[:, 1])
             runs = {"rmse_without": rm[:, 0], "rmse_with": rm[:, 1], "reduction": red,
                     "max_without": mx[:, 0], "max_with": mx[:, 1], "max_reduction": mred}
-            mc_vals = {
-                "mean": {"rmse_without": rm[:, 0].mean(), "rmse_with": rm[:, 1].mean(),
-                         "reduction": red.mean(), "max_without": mx[:, 0].mean(),
-                         "max_with": mx[:, 1].mean(), "max_reduction": mred.mean()},
-                "median": {"rmse_without": np.median(rm[:, 0]), "rmse_with": np.median(rm[:, 1]),
-                           "reduction": np.median(red), "max_without": np.median(mx[:, 0]),
-                           "max_with": np.median(mx[:, 1]), "max_reduction": np.median(mred)}}
+            mc_vals = {"mean": {k: v.mean() for k, v in runs.items()},
+                       "median": {k: np.median(v) for k, v in runs.items()}}
         src = ("replayed recording" if p["recording"] != NO_RECORDING
                else "single drive (run 0, via recording)")
         why = self.difference_note(p)

@@ -15,3 +15,12 @@ MASK_SEED001_DEG = Param(15.0, in_range(0.0, 89.0), "elevation mask (seed 001: 1
 SIGMA_SOP_M = Param(1.0, positive, "SOP pseudorange sigma (seed silent)", "m")
 #: seed 001 Fig. 4 and the EKF drives of seeds 000 and 002
 P_MD_SILENT = Param(1e-3, probability, "missed-detection probability (seed silent)")
+
+
+def parse_world(name, v):
+    """Parser of a ``world`` parameter: the error world of a synthesis, 'realistic'
+    (``sim.ErrorModel()``, docs/error-world.md) or 'clean' (white noise); case-insensitive."""
+    s = str(v).strip().lower()
+    if s not in ("realistic", "clean"):
+        raise ValueError(f"{name} must be 'realistic' or 'clean', got {v!r}")
+    return s
