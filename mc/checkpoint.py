@@ -170,3 +170,19 @@ class Checkpoint:
         """What provenance.json records of the checkpoints: resumed, units computed, reused."""
         return {"resumed": self.resumed, "units_computed": self.computed,
                 "units_reused": self.reused, "folder": str(self.folder)}
+
+
+def counted_unit(checkpoint, counter, name, compute):
+    """``checkpoint.unit(name, compute)`` for work that counts its own cost in
+    ``counter.evaluations`` (a metric of the run): the unit stores the evaluations it cost
+    beside its value, and a unit read back instead of computed adds them to the counter, so
+    the count is the same whether the run was resumed or not. Returns the value."""
+    before = counter.evaluations
+
+    def run():
+        value = compute()
+        return {"value": value, "evaluations": counter.evaluations - before}
+
+    out = checkpoint.unit(name, run)
+    counter.evaluations = before + int(out["evaluations"])
+    return out["value"]

@@ -31,6 +31,7 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim.batching import jit_kernel
+from oaraim.mc.checkpoint import counted_unit
 from oaraim.mc.keys import realization_keys
 from oaraim.studies.base import Param, ResumableStudy, axis, count, positive, probability
 from oaraim.studies.common import seed004 as c
@@ -234,13 +235,10 @@ class SopRequirements(ResumableStudy):
             return cells[(n, p)]
 
         def counted(name, n, p, compute):
-            def run():
-                e0 = cell(n, p).evaluations
-                value = compute(cell(n, p))
-                return {"value": value, "evaluations": cell(n, p).evaluations - e0}
-
-            out = checkpoint.unit(f"{name}-n{n}-p{p!r}", run)
-            return out["value"], int(out["evaluations"])
+            cl = cell(n, p)
+            e0 = cl.evaluations
+            value = counted_unit(checkpoint, cl, f"{name}-n{n}-p{p!r}", lambda: compute(cl))
+            return value, cl.evaluations - e0
 
         ns, ps = params["n_sops"], params["p_s_sop"]
         roots = np.full((len(ns), len(ps)), np.nan)

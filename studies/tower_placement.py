@@ -42,6 +42,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry, mc
+from oaraim.mc.checkpoint import counted_unit
 from oaraim.studies.base import (
     Param,
     ResumableStudy,
@@ -456,20 +457,6 @@ class TowerPlacement(ResumableStudy):
         from oaraim.studies.tower_placement_report import plot
 
         return plot(xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False), out_dir)
-
-
-def counted_unit(checkpoint, problem, name, compute):
-    """``checkpoint.unit(name, compute)`` that also restores the evaluations the unit cost
-    (``problem.evaluations``, a metric of the run) when it is read back instead of computed."""
-    before = problem.evaluations
-
-    def run():
-        value = compute()
-        return {"value": value, "evaluations": problem.evaluations - before}
-
-    out = checkpoint.unit(name, run)
-    problem.evaluations = before + int(out["evaluations"])
-    return out["value"]
 
 
 def _advance(progress, n):
