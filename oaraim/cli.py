@@ -186,6 +186,10 @@ def reproduce(
         "--only", hidden=True, help="run only these studies (tests)")] = None,
     trust_data: Annotated[bool, typer.Option(
         "--trust-data", help=TRUST_HELP)] = False,
+    jobs: Annotated[int, typer.Option(
+        "--jobs", "-j", help="studies run at once, each in a process of its own (a first run "
+        "is mostly compilation, one core's work per program); 1: one after the other in this "
+        "process, with each study's progress bar")] = 2,
 ):
     """Run every study and print the reproduction report.
 
@@ -193,7 +197,7 @@ def reproduce(
     A failing study is reported as FAILED and the others still run; the exit status is 2 if
     any failed. Full size writes OUT/REPORT.md, or DIR/REPORT.md with --results DIR.
     """
-    from oaraim.execute import check_data, run_study
+    from oaraim.execute import check_data
     from oaraim.registry import STUDIES
     from oaraim.report import build_report
 
@@ -224,7 +228,9 @@ def reproduce(
     missing = check_data([f for n in names for f in needs.get(n, ())], progress=progress)
     for msg in missing.values():
         err.print(f"[bold red]missing data:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    done = []
+    if jobs < 1:
+        _fail(f"--jobs must be >= 1, got {jobs}")
+    todo = []
     for name in names:
         lost = [f for f in needs.get(name, ()) if f in missing]
         if lost:
@@ -232,19 +238,16 @@ def reproduce(
         if name in failures:
             err.print(f"{name}: FAILED: {escape(str(failures[name]))}", highlight=False,
                       soft_wrap=True)
+        else:
+            todo.append(name)
+    done = []
+    for name, outcome in _run_studies(todo, jobs, seed=seed, out=out_dir, quick=quick,
+                                      show_progress=progress):
+        if isinstance(outcome, str):
+            failures[name] = outcome
+            err.print(f"{name}: FAILED: {escape(outcome)}", highlight=False, soft_wrap=True)
             continue
-        try:
-            summary, sdir, figures, wall = run_study(name, seed=seed, out=out_dir, quick=quick,
-                                                     show_progress=progress)
-        except ValueError as e:
-            failures[name] = " ".join(str(e).split())
-        except Exception as e:  # noqa: BLE001 - one study's bug must not stop the others
-            failures[name] = (f"{type(e).__name__}: {' '.join(str(e).split())} (rerun "
-                              f"`oaraim run {name}` for the traceback)")
-        if name in failures:
-            err.print(f"{name}: FAILED: {escape(str(failures[name]))}", highlight=False,
-                      soft_wrap=True)
-            continue
+        _summary, sdir, figures, wall = outcome
         done.append(name)
         err.print(f"{name}: {wall:.1f} s -> {sdir}", highlight=False)
         if results is not None:
@@ -268,6 +271,40 @@ def reproduce(
         for name, msg in failures.items():
             err.print(f"  {name}: {escape(str(msg))}", highlight=False, soft_wrap=True)
         raise typer.Exit(2)
+
+
+def _run_studies(names, jobs, **kw):
+    """(name, outcome) of each study as it finishes: ``execute.study_outcome``'s (summary,
+    folder, figures, wall) or one-line failure. ``jobs`` > 1 runs the studies that many at a
+    time in fresh processes (spawned: JAX does not survive a fork), the costliest first
+    (``Study.quick_cost_s``), with one bar over the studies; studies registered at run time
+    (tests) are not importable by a new process and run here, as everything does with 1."""
+    from oaraim.execute import study_outcome
+    from oaraim.registry import STUDIES
+
+    if jobs == 1 or len(names) < 2 or not all(STUDIES.is_builtin(n) for n in names):
+        for name in names:
+            yield name, study_outcome(name, **kw)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from oaraim.mc.progress import ProgressBar
+
+    order = sorted(names, key=lambda n: -STUDIES[n].quick_cost_s)
+    show, kw = kw["show_progress"], {**kw, "show_progress": False}
+    with ProgressBar(len(order), f"{len(order)} studies, {jobs} at a time", enabled=show) as bar, \
+            ProcessPoolExecutor(min(jobs, len(order)),
+                                mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(study_outcome, n, **kw): n for n in order}
+        for fut in as_completed(futures):
+            try:
+                outcome = fut.result()
+            except Exception as e:  # noqa: BLE001 - a worker that died (memory, a signal)
+                outcome = (f"its process ended ({type(e).__name__}: {' '.join(str(e).split())});"
+                           " rerun with --jobs 1, or `oaraim run` the study alone")
+            bar.advance(1)
+            yield futures[fut], outcome
 
 
 @app.command()

@@ -115,6 +115,18 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
                            execution)
 
 
+def study_outcome(name, *, seed, out, quick, show_progress):
+    """``run_study`` for ``reproduce``: its (summary, folder, figures, wall) or, where it fails,
+    the one line that says why (a worker process of ``reproduce --jobs`` runs this)."""
+    try:
+        return run_study(name, seed=seed, out=out, quick=quick, show_progress=show_progress)
+    except ValueError as e:
+        return " ".join(str(e).split())
+    except Exception as e:  # noqa: BLE001 - one study's bug must not stop the others
+        return (f"{type(e).__name__}: {' '.join(str(e).split())} (rerun `oaraim run {name}` "
+                "for the traceback)")
+
+
 def _run_locked(study, params, realizations, seed, out_dir, show_progress, resume, execution):
     t0 = time.perf_counter()
     extra = {}

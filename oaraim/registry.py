@@ -53,6 +53,18 @@ class StudyRegistry(MutableMapping):
             self._entries[name] = entry
         return entry
 
+    def is_builtin(self, name):
+        """Whether ``name`` is the study ``STUDY_CLASSES`` names (a new process, which imports
+        the registry afresh, builds the same one), not one registered at run time."""
+        entry = self._entries.get(name)
+        spec = STUDY_CLASSES.get(name)
+        if entry is None or spec is None:
+            return False
+        if isinstance(entry, str):
+            return entry == spec
+        module, _, cls = spec.partition(":")
+        return type(entry) is getattr(importlib.import_module(f"oaraim.studies.{module}"), cls)
+
     def __setitem__(self, name, study):
         self._entries[name] = study
 

@@ -201,6 +201,10 @@ class Study:
     #: parameter values of ``--quick`` (``reproduce --quick``) where the user sets none: the
     #: reduction of a study whose size is a parameter rather than a realization count
     quick_sets: dict = {}
+    #: rough seconds of ``--quick`` on 2 cores with an empty compilation cache (measured; a
+    #: scheduling hint only: ``reproduce --jobs`` starts the costliest studies first so that
+    #: its processes finish together)
+    quick_cost_s: float = 10.0
     #: most realizations one run holds (a study that keeps its realizations in memory; sweep
     #: studies chunk them to disk and have no bound): None = 20 x ``default_realizations``
     max_realizations: int | None = None

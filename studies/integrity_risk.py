@@ -294,6 +294,7 @@ class IntegrityRisk(SweepStudy):
                    "day (+ BPP towers), a scenario slot and x A_det; set by 'geometries'")
     default_realizations = 1
     quick_realizations = 1
+    quick_cost_s = 77
     #: --quick: 4 geometries per cell instead of 32, 5 magnitudes around A_det instead of 11,
     #: half the importance samples (relative errors ~1.4x), a tenth of the crude cross-check,
     #: ramp snapshots every 6 s instead of 2 s

@@ -301,6 +301,7 @@ class RinexReplay(Study):
     realization = "one epoch of the observation file (--realizations N: the first N epochs)"
     default_realizations = 2880
     quick_realizations = 2880
+    quick_cost_s = 40
 
     def data_files(self, params):
         """The default observation and navigation files when ``obs``/``nav`` are 'auto'."""

@@ -61,6 +61,7 @@ class Seed000EkfRaim(EkfDriveStudy):
                    "IMU, clock, SOP error world, initial error; both filters)")
     default_realizations = 200
     quick_realizations = 20
+    quick_cost_s = 31
     #: ``oaraim calibrate``: the fault's size and the towers' multipath, which the paper leaves
     #: open, from its two RMSEs (Monte Carlo medians: one real drive is a typical run)
     calibration = Calibration(

@@ -55,6 +55,7 @@ class Fig3Elevation(Study):
     realization = "one random 5-satellite sky and one added transmitter azimuth"
     default_realizations = 1_000_000
     quick_realizations = 200_000
+    quick_cost_s = 6
     params = {
         "n_gps": Param(5, count(4, 30), "GPS satellites M (seed 001 Fig. 3: 5)"),
         "mask_deg": shared.MASK_SEED001_DEG,

@@ -103,6 +103,7 @@ class Fig4HplCdf(Study):
     realization = "one random 5-satellite sky with 4 added satellites and 4 BPP towers"
     default_realizations = 1_000_000
     quick_realizations = 200_000
+    quick_cost_s = 6
     #: ``oaraim calibrate``: the two sigmas the paper leaves open, from its two availabilities
     calibration = Calibration(
         free=(Free("sigma_gps_m", 0.5, 3.0), Free("sigma_sop_m", 0.5, 10.0)),

@@ -189,6 +189,7 @@ class Fig5Madrid24h(Study):
     realization = "one BPP draw of the 5 towers at one epoch (--realizations = draws per epoch)"
     default_realizations = 1000
     quick_realizations = 100
+    quick_cost_s = 7
     nav_file = VILL_FILE
     #: ``oaraim calibrate``: the two sigmas the paper leaves open, from its two 24-h means
     calibration = Calibration(

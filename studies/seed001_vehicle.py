@@ -101,6 +101,7 @@ class Seed001Vehicle(Study):
     realization = "one noise draw of the whole drive (all epochs at 10 Hz)"
     default_realizations = 100
     quick_realizations = 20
+    quick_cost_s = 13
     #: ``oaraim calibrate``: the GPS URA of the PL's model and the LTE truth's noise (the
     #: filter's LTE sigma is estimated from it), from the two published mean HPLs
     calibration = Calibration(

@@ -26,6 +26,7 @@ class Seed002Outlier(EkfDriveStudy):
                    "IMU, clock, SOP error world, initial error; both filters)")
     default_realizations = 200
     quick_realizations = 20
+    quick_cost_s = 26
     scenario_fn = staticmethod(sim.drive_seed002)
     fig_prefix = "seed002"
     published_detection_s = 95.0

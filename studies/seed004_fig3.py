@@ -41,6 +41,7 @@ class Fig3OneSop(SweepStudy):
     realization = "one GPS epoch (uniform over the day) and one BPP SOP in its own constellation"
     default_realizations = 5000
     quick_realizations = 1024
+    quick_cost_s = 32
     nav_file = c.NAV_FILE
     axis_names = ("p_s_sop", "sigma_ura_sop_m")
     key_axes = ()  # common random numbers: every P_s^S sees the same geometries

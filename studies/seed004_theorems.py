@@ -161,6 +161,7 @@ class Theorems(SweepStudy):
                    "compatible SOP parameters and residuals")
     default_realizations = 12_500  # x 8 values of n_gps = 10^5 (issue: >= 10^5)
     quick_realizations = 1024
+    quick_cost_s = 15
     axis_names = ("n_gps",)
     key_axes = ("n_gps",)
     params = {

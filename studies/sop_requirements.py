@@ -177,6 +177,7 @@ class SopRequirements(ResumableStudy):
     realization = "one GPS epoch and one BPP draw of the towers (Fig. 4's draws)"
     default_realizations = 1024
     quick_realizations = 512
+    quick_cost_s = 36
     max_realizations = 20_000
     #: --quick: 2 SOPs at two P_s^S of one fault-mode order (one compiled program), the grid
     #: check at 1e-4 and a 2 x 2 map: every comparison of the study, ~1 min

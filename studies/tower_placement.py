@@ -344,6 +344,7 @@ class TowerPlacement(ResumableStudy):
     realization = "one random placement of the towers (the baseline the optimiser is compared with)"
     default_realizations = 256
     quick_realizations = 32
+    quick_cost_s = 24
     #: the generic study tests' cap (a realization evaluates a whole placement over the region)
     test_realizations = 16
     #: --quick: a coarser region and sky and fewer iterations, the same three comparisons

@@ -90,3 +90,37 @@ def test_prune_removes_the_oldest_entries_down_to_three_quarters(tmp_path):
     assert len(os.listdir(tmp_path)) == 8
     _compile_cache._prune(tmp_path, 700)  # over: down to <= 525 bytes, the oldest first
     assert sorted(os.listdir(tmp_path)) == ["e3", "e4", "e5", "e6", "e7"]
+
+
+FLAGS_PROBE = """
+import json, os, sys
+if sys.argv[1] == "jax-first":
+    import jax.numpy as jnp
+    jnp.ones(3).sum().block_until_ready()
+import oaraim
+from oaraim import _compile_cache
+print(json.dumps({"xla_flags": os.environ.get("XLA_FLAGS"),
+                  "in_effect": _compile_cache.use_faster_compiler_flags()}))
+"""
+
+
+@pytest.mark.parametrize("case", ["fresh", "user-flags", "user-sets-it", "jax-first"])
+def test_faster_compiler_flags_are_added_before_jax_runs_and_never_over_the_users(case):
+    """import oaraim adds XLA_CPU_FLAGS to XLA_FLAGS (kept with the user's other flags); a flag
+    the user set stays as set; a process that ran JAX first keeps XLA's defaults and says so."""
+    import json
+
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env["XLA_FLAGS"] = {"fresh": "", "user-flags": "--xla_cpu_enable_fast_math=false",
+                        "user-sets-it": "--xla_cpu_use_fusion_emitters=true",
+                        "jax-first": ""}[case]
+    out = subprocess.run([sys.executable, "-c", FLAGS_PROBE, case], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    ours = " ".join(f"--{k}={v}" for k, v in _compile_cache.XLA_CPU_FLAGS.items())
+    want = {"fresh": (ours, True),
+            "user-flags": ("--xla_cpu_enable_fast_math=false " + ours, True),
+            "user-sets-it": ("--xla_cpu_use_fusion_emitters=true", False),
+            "jax-first": ("", False)}[case]
+    assert (got["xla_flags"], got["in_effect"]) == want

@@ -7,6 +7,7 @@ as no request at all.
 
 import functools
 import gzip
+import re
 import http.server
 import shutil
 import socket
@@ -522,3 +523,30 @@ def test_test_suite_without_a_source_skips_naming_files_or_fails_when_required(c
     assert "Connection refused" in out and "(OARAIM_REQUIRE_DATA=1)" in out
     assert "obs/07590920.05n, obs/07590920.05o, obs/30400920.05n" in out
     assert "not tried, as almanac/alm_gal_ed259.txt could not be fetched" in out
+
+
+def test_reproduce_runs_studies_in_parallel_processes_with_the_same_report(tmp_path):
+    """--jobs 2 runs the studies in spawned processes (the costliest first) and prints the
+    report the one-process run prints, in registry order (the results do not depend on the
+    process); --jobs 0 is one line."""
+    only = ["--only", "seed001-fig4-hpl-cdf", "--only", "seed001-fig3-elevation"]
+    reports = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}"
+        r = runner.invoke(app, ["reproduce", "--quick", "--out", str(out), "--no-progress",
+                                "--jobs", str(jobs), *only], catch_exceptions=False)
+        assert r.exit_code == 0, r.output
+        reports[jobs] = re.sub(r"wall [0-9.]+ s", "wall", r.stdout)
+        assert all((out / n / "summary.json").exists() for n in only[1::2])
+    assert reports[1] == reports[2]
+    assert reports[2].index("## seed001-fig3-elevation") < reports[2].index(
+        "## seed001-fig4-hpl-cdf")
+    r = runner.invoke(app, ["reproduce", "--quick", "--jobs", "0", *only])
+    assert r.exit_code == 2 and "--jobs must be >= 1, got 0" in _one_line(r.output)
+
+
+def test_only_registry_studies_go_to_worker_processes(fakes):
+    """A study registered at run time (the fakes) does not exist in a new process: reproduce
+    runs those in its own."""
+    assert STUDIES.is_builtin("seed001-fig4-hpl-cdf")
+    assert not STUDIES.is_builtin("fake-ok") and not STUDIES.is_builtin("no-such-study")

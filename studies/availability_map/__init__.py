@@ -398,6 +398,7 @@ class AvailabilityMap(SweepStudy):
                    "realizations is set by the grid: longitudes x epochs per latitude")
     default_realizations = 1  # replaced by fixed_realizations (the grid)
     quick_realizations = 1
+    quick_cost_s = 40
     axis_names = ("lat_deg",)
     key_axes = ("lat_deg",)  # BPP towers differ from row to row
     params = {

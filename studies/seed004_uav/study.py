@@ -210,6 +210,7 @@ class Seed004Uav(Study):
                    "--realizations N: the first N)")
     default_realizations = PUBLISHED_EPOCHS
     quick_realizations = PUBLISHED_EPOCHS
+    quick_cost_s = 88
     #: --quick: the whole flight (the Fig. 7 ramp included) at a twelfth of the epoch rate
     #: (240 epochs, ~1.1 Hz: the quarter rate took 49 s of a warm `reproduce --quick`)
     quick_sets = {"n_epochs": PUBLISHED_EPOCHS // 12}
