@@ -7,8 +7,8 @@ as no request at all.
 
 import functools
 import gzip
-import re
 import http.server
+import re
 import shutil
 import socket
 import threading
