@@ -16,19 +16,25 @@ from rich.text import Text
 
 
 class _RateColumn(ProgressColumn):
+    def __init__(self, unit="real"):
+        super().__init__()
+        self.unit = unit
+
     def render(self, task):
         speed = task.finished_speed or task.speed
-        return Text("-- real/s" if not speed else f"{speed:,.0f} real/s")
+        return Text(f"-- {self.unit}/s" if not speed else f"{speed:,.0f} {self.unit}/s")
 
 
 class ProgressBar:
     """``with ProgressBar(total, "seed001-fig3") as bar: bar.advance(n)``.
 
     Disabled (``enabled=False``) it only counts. Output goes to stderr so that stdout stays
-    machine-readable.
+    machine-readable. ``rate_unit``: what the rate column counts per second ("real":
+    realizations), None for no rate column (a few long items, e.g. ``reproduce``'s studies).
     """
 
-    def __init__(self, total: int, description: str, enabled: bool = True):
+    def __init__(self, total: int, description: str, enabled: bool = True,
+                 rate_unit: str | None = "real"):
         self.total = int(total)
         self.done = 0
         self.enabled = enabled
@@ -37,7 +43,8 @@ class ProgressBar:
         if enabled:
             self._progress = Progress(
                 TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                _RateColumn(), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                *[_RateColumn(rate_unit)] * (rate_unit is not None), TimeElapsedColumn(),
+                TextColumn("ETA"), TimeRemainingColumn(),
                 console=Console(stderr=True), transient=False,
             )
             self._task = self._progress.add_task(description, total=self.total)

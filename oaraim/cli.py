@@ -293,7 +293,8 @@ def _run_studies(names, jobs, **kw):
 
     order = sorted(names, key=lambda n: -STUDIES[n].quick_cost_s)
     show, kw = kw["show_progress"], {**kw, "show_progress": False}
-    with ProgressBar(len(order), f"{len(order)} studies, {jobs} at a time", enabled=show) as bar, \
+    with ProgressBar(len(order), f"{len(order)} studies, {jobs} at a time", enabled=show,
+                     rate_unit=None) as bar, \
             ProcessPoolExecutor(min(jobs, len(order)),
                                 mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {pool.submit(study_outcome, n, **kw): n for n in order}
