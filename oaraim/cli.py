@@ -206,6 +206,8 @@ def reproduce(
     if quick and results is not None:
         _fail("--results takes the full-size run: drop --quick, or drop --results (a quick run "
               "writes only under --out)")
+    if jobs < 1:
+        _fail(f"--jobs must be >= 1, got {jobs}")
     from oaraim.mc.store import OutputError, check_output_folder
 
     try:  # once, before any study: not one failure per study after its computation
@@ -228,8 +230,6 @@ def reproduce(
     missing = check_data([f for n in names for f in needs.get(n, ())], progress=progress)
     for msg in missing.values():
         err.print(f"[bold red]missing data:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    if jobs < 1:
-        _fail(f"--jobs must be >= 1, got {jobs}")
     todo = []
     for name in names:
         lost = [f for f in needs.get(name, ()) if f in missing]
