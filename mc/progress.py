@@ -41,12 +41,11 @@ class ProgressBar:
         self.t0 = time.perf_counter()
         self._progress = None
         if enabled:
-            self._progress = Progress(
-                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                *[_RateColumn(rate_unit)] * (rate_unit is not None), TimeElapsedColumn(),
-                TextColumn("ETA"), TimeRemainingColumn(),
-                console=Console(stderr=True), transient=False,
-            )
+            columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
+            if rate_unit is not None:
+                columns.append(_RateColumn(rate_unit))
+            columns += [TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn()]
+            self._progress = Progress(*columns, console=Console(stderr=True), transient=False)
             self._task = self._progress.add_task(description, total=self.total)
 
     def __enter__(self):
