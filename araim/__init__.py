@@ -39,6 +39,7 @@ from oaraim.araim.mhss import (
     Sources,
     protection_levels,
     protection_levels_kernel,
+    protection_levels_priors_kernel,
     switch_flags_kernel,
 )
 from oaraim.araim.position_opt import PositionOptimization
@@ -64,6 +65,7 @@ __all__ = [
     "exposure_probability",
     "protection_levels",
     "protection_levels_kernel",
+    "protection_levels_priors_kernel",
     "separation_kernel",
     "solution_separation",
     "switch_flags_kernel",

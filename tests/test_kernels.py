@@ -112,6 +112,35 @@ def test_protection_levels_kernel_static_arguments_are_checked(bench):
                                        all_in_view_weighting="x")
 
 
+def test_priors_kernel_equals_one_kernel_call_per_prior_set(bench):
+    """``protection_levels_priors_kernel`` over three P_s^S values (one with a P_s of 1.2 at a
+    valid source of geometry 4) gives, set by set, what ``protection_levels_kernel`` gives
+    with that set's priors (measured bit-identical; compared to 1e-12): the same statuses,
+    orders and mode counts, INVALID_INPUT in that set only. A set's bits do not depend on the
+    other sets (one loop body per set): the second set alone gives the same bits."""
+    sources, p_const = bench
+    sop = sources.constellation == 1
+    sets = np.stack([np.where(sop, p, sources.p_sat) for p in (1e-5, 1e-3, 5e-2)])
+    sets[1, 4, np.flatnonzero(sources.valid[4])[0]] = 1.2
+    pc = np.broadcast_to(p_const, (3,) + p_const.shape)
+    res = araim.protection_levels_priors_kernel(sources._replace(p_sat=sets), pc, BUDGET,
+                                                max_order=2, fault_modes=GROUPED)
+    orders = set()
+    for i in range(3):
+        one = araim.protection_levels_kernel(sources._replace(p_sat=sets[i]), pc[i], BUDGET,
+                                             max_order=2, fault_modes=GROUPED)
+        _equal(type(one)(*(x[i] for x in res)), one, rtol=1e-12)
+        orders |= set(np.asarray(one.order).tolist())
+        bad = np.asarray(one.status) == Status.INVALID_INPUT
+        assert bad.tolist() == [i == 1 and b == 4 for b in range(N)]
+    assert orders == {1, 2}  # both templates' paths are exercised
+    alone = araim.protection_levels_priors_kernel(sources._replace(p_sat=sets[1:2]), pc[1:2],
+                                                  BUDGET, max_order=2, fault_modes=GROUPED)
+    _equal(type(alone)(*(x[0] for x in alone)), type(res)(*(x[1] for x in res)))
+    with pytest.raises(ValueError, match="leading axis"):
+        araim.protection_levels_priors_kernel(sources, p_const, BUDGET, max_order=1)
+
+
 @pytest.fixture(scope="module")
 def fde():
     c, rng = fde_cases(21, 16)

@@ -110,6 +110,30 @@ def test_fig4_common_random_numbers(cell):
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
+def test_fig4_cells_of_a_p_s_group_share_one_kernel_call(cell, monkeypatch):
+    """The cells whose P_s^S needs the same order form a group computed by one kernel call:
+    the group's other cells are read from the cache (no kernel call), and a grid narrowed to
+    one P_s^S value (a group of one) gives the same bits as the full grid's group."""
+    kernel, params, coords, keys = cell
+    a = kernel(keys)
+    assert len(kernel.group) > 1 and coords["p_s_sop"] in kernel.group
+    slots = kernel.table["az_rad"].shape[1]
+    assert all(c.order_for(slots, 4, p, 1e-4) == kernel.max_order for p in kernel.group)
+    sibling = next(p for p in kernel.group if p != coords["p_s_sop"])
+    calls = []
+    real = c.sop_kernel
+    monkeypatch.setattr(c, "sop_kernel", lambda *x: calls.append(x) or real(*x))
+    Fig4Cell(params, {**coords, "p_s_sop": sibling})(keys)
+    assert calls == []
+    alone = Fig4Cell({**params, "p_s_sop": (coords["p_s_sop"],)}, coords)
+    assert alone.group == (coords["p_s_sop"],)
+    b = alone(keys)
+    assert len(calls) == 1
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
 def test_fig3_one_sop_raises_pls_and_ignores_its_sigma():
     """Theorem 2 / Fig. 3 at reduced size: every realization's HPL and VPL rise; the SOP's own
     sigma_URA^S changes nothing (its clock absorbs it)."""

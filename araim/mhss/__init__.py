@@ -9,8 +9,9 @@ A small package, one concern per module:
   thresholds (eqs. 8-12, ``project``);
 - ``root``: the PL equations and their root finder (eqs. 14-16, ``pls_from_projection``,
   ``solve_pl``);
-- ``entry``: the jit-safe kernel ``protection_levels_kernel`` and the host function
-  ``protection_levels`` over it;
+- ``entry``: the jit-safe kernel ``protection_levels_kernel`` (and
+  ``protection_levels_priors_kernel``: several prior sets over the same geometries) and the
+  host function ``protection_levels`` over it;
 - ``implicit``: the derivatives of the PL roots by the implicit function theorem
   (``implicit_root``, a ``jax.custom_jvp`` on the root finder; docs/gradients.md);
 - ``switches``: where those derivatives are not defined (``switch_flags_kernel``).
@@ -25,6 +26,7 @@ from oaraim.araim.mhss.entry import (
     kernel_cache_size,
     protection_levels,
     protection_levels_kernel,
+    protection_levels_priors_kernel,
     protection_levels_threaded,
 )
 from oaraim.araim.mhss.implicit import implicit_root, risk_partials
@@ -101,6 +103,7 @@ __all__ = [
     "project",
     "protection_levels",
     "protection_levels_kernel",
+    "protection_levels_priors_kernel",
     "protection_levels_threaded",
     "q_function",
     "q_inverse",

@@ -5,12 +5,14 @@ host threads) over the same compiled kernel. The kernel composes ``project`` (fa
 projectors), ``pls_from_projection`` (the PL root finder) and, on request, the Blanch et al.
 (2015) all-in-view estimator (``araim.position_opt``), chunk by chunk (``araim.batching``)."""
 
+import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from oaraim.araim import linalg
 from oaraim.araim.batching import (
     CHUNK,
     bucket,
@@ -27,6 +29,7 @@ from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
     check_order,
     fault_mode_rule,
+    select_fault_modes,
     to_batch_first,
     to_batch_last,
 )
@@ -37,17 +40,24 @@ from oaraim.araim.mhss.inputs import (
     check_inputs,
     check_options,
     host_inputs,
+    invalid_input_flags,
     prepare_inputs,
 )
 from oaraim.araim.mhss.orders import higher_order_flags, required_order
-from oaraim.araim.mhss.projection import adjusted_projection, project
+from oaraim.araim.mhss.projection import (
+    adjusted_projection,
+    finish_projection,
+    mode_solutions,
+    project,
+)
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.position_opt import check_position_optimization
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 
 __all__ = ["MHSSResult", "batch_last_inputs", "kernel_cache_size", "protection_levels",
-           "protection_levels_kernel", "protection_levels_threaded"]
+           "protection_levels_kernel", "protection_levels_priors_kernel",
+           "protection_levels_threaded"]
 
 
 class MHSSResult(NamedTuple):
@@ -118,6 +128,21 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
     return pl, status, emt, sigma_acc_u, take
 
 
+def _result(pr, pl, status, emt, sigma_acc_u, adjusted):
+    """The batch-first ``MHSSResult`` of a batch-last projection and its PLs (3, B)."""
+    ok = status == Status.OK
+    # the HPL of the finite PLs, inf where not OK: the same values, and no inf / inf = NaN in
+    # its derivative there (issue 27)
+    pl_ok = jnp.where(ok[None], pl[:2], 0.0)
+    hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
+    out = MHSSResult(
+        hpl_m=hpl, vpl_m=pl[2], emt_m=emt,
+        sigma_acc_u_m=jnp.where(ok, sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
+        p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl,
+        position_adjusted=adjusted)
+    return MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+
+
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
                             budget, max_order, all_in_view_weighting, iterations,
                             input_flags=False, fault_modes=DEFAULT_RULE,
@@ -138,17 +163,7 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
     if position_optimization is not None:
         pl, status, emt, sigma_acc_u, adjusted = _optimized_position(
             pr, pl, status, emt, args, budget, iterations, position_optimization)
-    ok = status == Status.OK
-    # the HPL of the finite PLs, inf where not OK: the same values, and no inf / inf = NaN in
-    # its derivative there (issue 27)
-    pl_ok = jnp.where(ok[None], pl[:2], 0.0)
-    hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
-    out = MHSSResult(
-        hpl_m=hpl, vpl_m=pl[2], emt_m=emt,
-        sigma_acc_u_m=jnp.where(ok, sigma_acc_u, jnp.inf), n_modes=pr.n_modes,
-        p_not_monitored=pr.p_not_monitored, status=status, order=pr.order, pl_enu_m=pl,
-        position_adjusted=adjusted)
-    out = MHSSResult(*(to_batch_first(x, x.shape[-1:]) for x in out))
+    out = _result(pr, pl, status, emt, sigma_acc_u, adjusted)
     if order_flags:
         return out, flags, more
     return (out, flags) if input_flags else out
@@ -248,6 +263,91 @@ def protection_levels_kernel(sources: Sources, p_const, budget: IntegrityBudget,
                        position_optimization=check_position_optimization(
                            position_optimization),
                        iterations=check_int("iterations", iterations, 1))
+
+
+
+def _priors_flat(g, constellation, var_int, var_acc, b_nom, valid, p_sat, p_const, budget,
+                 max_order, all_in_view_weighting, iterations, fault_modes):
+    """One flat batch: the geometry arrays (B, ...) and the prior sets p_sat (B, P, L),
+    p_const (B, P, C); returns the ``MHSSResult`` fields as (B, P, ...). The mode solutions
+    once, then one loop step per prior set (``jax.lax.map``: each set is computed by the same
+    loop body, so a set's results do not depend on how many sets there are or where it
+    stands)."""
+    tl = to_batch_last
+    g, constellation, var_int, var_acc, b_nom, valid = (
+        linalg.materialize(x) for x in (tl(g, 2), tl(constellation, 1), tl(var_int, 1),
+                                        tl(var_acc, 1), tl(b_nom, 1), tl(valid, 1)))
+    p_sat, p_const = linalg.materialize(tl(p_sat, 2)), linalg.materialize(tl(p_const, 2))
+    C = p_const.shape[1]
+    # the template's exclusions do not depend on the probabilities: those of the first set
+    excluded = select_fault_modes(valid, constellation, p_sat[0], p_const[0], budget,
+                                  fault_modes, max_order).excluded
+    modes = mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, excluded, C,
+                           max_order, all_in_view_weighting, True, fault_modes)
+
+    def one(priors):
+        ps, pc = priors
+        flags = linalg.materialize(invalid_input_flags(g, constellation, var_int, var_acc,
+                                                       b_nom, ps, valid, C))
+        fm = select_fault_modes(valid, constellation, ps, pc, budget, fault_modes, max_order)
+        pr = finish_projection(fm, modes, budget, flags)
+        pl, status, emt = pls_from_projection(pr, budget, iterations)
+        return _result(pr, pl, status, emt, pr.sigma_acc_u, jnp.zeros_like(status, bool))
+
+    out = jax.lax.map(one, (p_sat, p_const))  # (P, B, ...)
+    return MHSSResult(*(jnp.moveaxis(x, 0, 1) for x in out))
+
+
+@functools.partial(jit_kernel, static_argnames=("budget", "max_order",
+                                                "all_in_view_weighting", "fault_modes",
+                                                "iterations"))
+def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
+                   iterations):
+    g = sources.g
+    batch, (L, C) = g.shape[:-2], (g.shape[-2], p_const.shape[-1])
+    n_sets = sources.p_sat.shape[0]
+    geo = [jnp.broadcast_to(x, batch + s) for x, s in (
+        (g, (L, 3)), (sources.constellation, (L,)), (sources.var_int_m2, (L,)),
+        (sources.var_acc_m2, (L,)), (sources.b_nom_m, (L,)), (sources.valid, (L,)))]
+    # the set axis after the batch axes, so that the chunks (araim.batching) cut the batch
+    sets = [jnp.moveaxis(jnp.broadcast_to(x, (n_sets,) + batch + s), 0, len(batch))
+            for x, s in ((sources.p_sat, (L,)), (p_const, (C,)))]
+
+    def kernel(*xs):
+        return _priors_flat(*xs, budget, max_order, all_in_view_weighting, iterations,
+                            fault_modes)
+
+    out = map_chunks(kernel, geo + sets, batch)  # (..., P, ...)
+    return MHSSResult(*(jnp.moveaxis(x, len(batch), 0) for x in out))
+
+
+def protection_levels_priors_kernel(sources: Sources, p_const, budget: IntegrityBudget, *,
+                                    max_order, all_in_view_weighting="int", fault_modes=None,
+                                    iterations=PL_ITERATIONS) -> MHSSResult:
+    """``protection_levels_kernel`` under P sets of prior probabilities over the same
+    geometries: ``sources.p_sat`` (P, ..., L) and ``p_const`` (P, ..., C) carry the sets on a
+    leading axis, the other fields the batch shape (...). The fault-tolerant solutions
+    (eqs. 8-11: the projections, sigmas, biases and separations) do not depend on the priors
+    and are computed once per geometry; each set then gets its live modes, thresholds (eq. 12,
+    N_f depends on the live modes), P_NM and PLs. For sweeps over P_s or P_const (seed 004
+    Figs. 3 and 4): ~2x faster per set than one call per set (docs/benchmarks.md). Every set
+    uses the template of order ``max_order``; results equal ``protection_levels_kernel``'s
+    set by set to rounding (tested). Jit-safe, failures as data as in
+    ``protection_levels_kernel``; no ``position_optimization``.
+
+    Returns:
+      ``MHSSResult`` with shape (P, ...) (``pl_enu_m`` (P, ..., 3)).
+    """
+    check_options(budget, all_in_view_weighting)
+    rule = fault_mode_rule(fault_modes)
+    max_order = check_order(rule, check_int("max_order", max_order, 1))
+    sources = Sources(*sources)
+    if jnp.ndim(sources.p_sat) != jnp.ndim(sources.g) or jnp.ndim(p_const) < 2:
+        raise ValueError("protection_levels_priors_kernel takes the prior sets on a leading "
+                         "axis: p_sat (P, ..., L) with g (..., L, 3), and p_const (P, ..., C)")
+    return _priors_kernel(sources, p_const, budget=budget, max_order=max_order,
+                          all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
+                          iterations=check_int("iterations", iterations, 1))
 
 
 

@@ -360,6 +360,41 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
                                             valid, C))
     fm = select_fault_modes(valid, constellation, p_sat, p_const, budget, fault_modes,
                             max_order)
+    modes = mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, fm.excluded, C,
+                           max_order, all_in_view_weighting, single_downdates, fault_modes)
+    pr = finish_projection(fm, modes, budget, flags)
+    return (pr, flags) if input_flags else pr
+
+
+class ModeSolutions(NamedTuple):
+    """Every mode's fault-tolerant solution of a batch-last batch, before the priors: what
+    ``mode_solutions`` computes from the geometry, weights and biases alone (the fault-mode
+    template's exclusions do not depend on the probabilities), and ``finish_projection`` turns
+    into a ``Projection`` for one set of priors. K = 1 + candidate modes."""
+
+    s_pos: jax.Array
+    """(K, 3, L, B) position rows of S^(i)."""
+    var_pos: jax.Array
+    """(K, 3, B) sigma_q^(i)^2."""
+    bias: jax.Array
+    """(K, 3, B) b_q^(i)."""
+    sigma_ss: jax.Array
+    """(K, 3, B) sigma_ss,q^(i)."""
+    nonsingular: jax.Array
+    """(K, B)."""
+    valid: jax.Array
+    """(L, B) the sources used."""
+    member: jax.Array
+    """(L, C, B) source l is a valid member of constellation c."""
+    var_acc: jax.Array
+    """(L, B) C_acc diagonal, 0 at padding."""
+
+
+def mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, excluded, C, max_order,
+                   all_in_view_weighting, single_downdates=True,
+                   fault_modes: FaultModeRule = DEFAULT_RULE) -> ModeSolutions:
+    """The per-mode solutions of ``project`` (eqs. 8-11) for the candidate modes' exclusions
+    ``excluded`` (T, L, B) of ``select_fault_modes``; stored batch-last inputs (``project``)."""
     g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: docs/benchmarks.md)
     w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
@@ -370,12 +405,12 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
         valid[:, None, :] & (constellation[:, None, :] == jnp.arange(C)[None, :, None]))
     if all_in_view_weighting == "int":
         s_pos, var_pos, bias, sigma_ss, nonsingular = int_weighted_modes(
-            g, w_int, var_acc, b_nom, valid, member, fm.excluded, fault_modes, max_order,
+            g, w_int, var_acc, b_nom, valid, member, excluded, fault_modes, max_order,
             single_downdates)
     else:
         cols = [g[None, :, 0], g[None, :, 1], g[None, :, 2]]
         cols += [member[None, :, c].astype(g.dtype) for c in range(C)]
-        keep = jnp.concatenate([valid[None], valid[None] & ~fm.excluded], axis=0)  # (K, L, B)
+        keep = jnp.concatenate([valid[None], valid[None] & ~excluded], axis=0)  # (K, L, B)
         s_pos, var_pos, bias, sigma_ss, nonsingular = _generic_modes(
             keep, w_int, cols, member, b_nom, var_acc, None)
         w_acc = linalg.inverse_variance_weights(
@@ -392,9 +427,15 @@ def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, bu
         sigma_ss = linalg.sqrt0(jnp.sum((s_pos - s_pos[:1]) ** 2 * var_acc[None, None],
                                           axis=2))
         sigma_ss = jnp.where(nonsingular[:, None], sigma_ss, 0.0)
-    pr = _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc,
-                 budget, g.dtype, flags)
-    return (pr, flags) if input_flags else pr
+    return ModeSolutions(s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_acc)
+
+
+def finish_projection(fm, modes: ModeSolutions, budget, invalid_input=False) -> Projection:
+    """The ``Projection`` of one set of priors: the fault modes ``fm`` of
+    ``select_fault_modes`` (live modes, priors, order) over the solutions ``modes``."""
+    return _finish(fm, modes.s_pos, modes.var_pos, modes.bias, modes.sigma_ss,
+                   modes.nonsingular, modes.valid, modes.member, modes.var_acc, budget,
+                   modes.var_acc.dtype, invalid_input)
 
 
 def _k_fa(n_modes, K, budget, dtype):

@@ -31,6 +31,7 @@ sensitivity run in results/):
 import collections
 import functools
 import hashlib
+import threading
 from pathlib import Path
 
 import jax
@@ -42,7 +43,12 @@ from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
+from oaraim.araim.mhss import (
+    Sources,
+    protection_levels_kernel,
+    protection_levels_priors_kernel,
+    required_order,
+)
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
     Param,
@@ -221,19 +227,29 @@ TOL_M = 2e-3
 @functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
 def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
                d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes=FAULT_MODES):
-    """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,)."""
+    """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,) under each P_s^S of
+    ``p_s_sop`` (P,): outputs (P, chunk). The geometry's fault-tolerant solutions are shared
+    by the P values (``araim.protection_levels_priors_kernel``)."""
     def draw(k):
         _, az, el, v = draw_gps(k, t_az, t_el, t_valid)
         tw = draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m)
         return az, el, v, tw.az_rad, tw.el_rad
 
     az, el, v, az_s, el_s = jax.vmap(draw)(keys)
-    x = concat_inputs(gps_inputs(el, v), sop_inputs(az_s.shape, sigma_ura_sop_m, p_s_sop,
-                                                          1))
+    x = concat_inputs(gps_inputs(el, v), sop_inputs(az_s.shape, sigma_ura_sop_m, 0.0, 1))
     g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
-    hpl, vpl, status, order, _ = mhss(g, x, jnp.array([P_CONST_GPS, p_const_sop]),
-                                        max_order, fault_modes)
-    return {"hpl_sop_m": hpl, "vpl_sop_m": vpl, "status_sop": status, "order_sop": order}
+    n_sets = p_s_sop.shape[0]
+    p_sat = jnp.concatenate([
+        jnp.broadcast_to(x["p_sat"][..., :el.shape[-1]], (n_sets,) + el.shape),
+        jnp.broadcast_to(p_s_sop[:, None, None], (n_sets,) + az_s.shape)], -1)
+    p_const = jnp.broadcast_to(jnp.stack([jnp.full_like(p_const_sop, P_CONST_GPS),
+                                          p_const_sop]), (n_sets, keys.shape[0], 2))
+    r = protection_levels_priors_kernel(
+        Sources(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"], p_sat,
+                x["valid"]), p_const, BUDGET, max_order=max_order,
+        fault_modes=fault_mode_rule(fault_modes))
+    return {"hpl_sop_m": r.hpl_m, "vpl_sop_m": r.vpl_m, "status_sop": r.status,
+            "order_sop": r.order}
 
 
 @functools.partial(jit_kernel, static_argnames=("fault_modes",))
@@ -288,9 +304,33 @@ def compare(gps, sop):
     }
 
 
+#: GPS + SOP results by (cell parameters but P_s^S, its group of P_s^S values, keys): the cells
+#: of one group share the group's kernel call (``Fig4Cell``); bounded, least recently used
+_SOP_CACHE = collections.OrderedDict()
+_SOP_CACHE_SIZE = 256
+_SOP_LOCK = threading.Lock()
+
+
+def p_s_group(p_s_values, p_s, order, n_gps_slots, n_sops, p_const_sop, fault_modes):
+    """The P_s^S values of a run (``p_s_values``, the grid) that share cell ``p_s``'s static
+    order (``order_for``): one kernel call computes them all on the same geometries. Always
+    holds ``p_s``."""
+    group = tuple(float(v) for v in np.atleast_1d(p_s_values)
+                  if order_for(n_gps_slots, n_sops, float(v), p_const_sop, fault_modes) == order)
+    return group if p_s in group else (p_s,)
+
+
 class Fig4Cell:
     """The kernel of one cell: keys (chunk,) -> per-realization outputs (NumPy). ``coords``
-    gives n_sops, sigma_ura_sop_m and p_s_sop (axes, or fixed parameters)."""
+    gives n_sops, sigma_ura_sop_m and p_s_sop (axes, or fixed parameters).
+
+    The GPS + SOP PLs of a chunk of keys are computed for every P_s^S of the run's grid with
+    the cell's order (``p_s_group``) at once and kept for the group's other cells (common
+    random numbers: they draw the same geometries), so the fault-tolerant solutions of a
+    geometry are computed once per order instead of once per P_s^S value. Each value's
+    results come from the same loop body of one program whatever the group
+    (``araim.protection_levels_priors_kernel``): a narrowed grid gives the same bits (tested).
+    """
 
     def __init__(self, params, coords):
         self.table = gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
@@ -298,16 +338,38 @@ class Fig4Cell:
         self.jtable = {k: jnp.asarray(self.table[k]) for k in ("az_rad", "el_rad", "valid")}
         n_slots = self.table["az_rad"].shape[1]
         self.n_sops = int(coords["n_sops"])
-        self.args = (float(coords["sigma_ura_sop_m"]), float(coords["p_s_sop"]),
-                     params["p_const_sop"], params["d_min_m"], params["d_max_m"],
-                     params["h_min_m"], params["h_max_m"])
+        self.p_s = float(coords["p_s_sop"])
+        self.args = (float(coords["sigma_ura_sop_m"]), params["p_const_sop"],
+                     params["d_min_m"], params["d_max_m"], params["h_min_m"], params["h_max_m"])
         self.fault_modes = params["fault_modes"]
-        self.max_order = order_for(n_slots, self.n_sops, float(coords["p_s_sop"]),
-                                     params["p_const_sop"], self.fault_modes)
+        self.max_order = order_for(n_slots, self.n_sops, self.p_s, params["p_const_sop"],
+                                     self.fault_modes)
+        self.group = p_s_group(params.get("p_s_sop", self.p_s), self.p_s, self.max_order,
+                               n_slots, self.n_sops, params["p_const_sop"], self.fault_modes)
+
+    def sop(self, keys):
+        """The GPS + SOP outputs of this cell's group for ``keys``: {name: (P, chunk)}."""
+        digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
+                                 digest_size=16).hexdigest()
+        k = (self.table_id, self.n_sops, self.args, self.group, self.max_order,
+             self.fault_modes, digest)
+        with _SOP_LOCK:
+            hit = _SOP_CACHE.get(k)
+            if hit is not None:
+                _SOP_CACHE.move_to_end(k)
+                return hit
+        sigma, p_const_sop, *annulus = self.args
+        out = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
+                         self.jtable["valid"], self.n_sops, sigma, np.asarray(self.group),
+                         p_const_sop, *annulus, self.max_order, self.fault_modes)
+        out = {name: np.asarray(v) for name, v in out.items()}
+        with _SOP_LOCK:
+            _SOP_CACHE[k] = out
+            while len(_SOP_CACHE) > _SOP_CACHE_SIZE:
+                _SOP_CACHE.popitem(last=False)
+        return out
 
     def __call__(self, keys):
         gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
-        sop = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
-                         self.jtable["valid"], self.n_sops, *self.args, self.max_order,
-                         self.fault_modes)
-        return compare(gps, sop)
+        j = self.group.index(self.p_s)
+        return compare(gps, {name: v[j] for name, v in self.sop(keys).items()})
