@@ -138,6 +138,35 @@ def test_grid_sky_matches_geometry_sky(small, shared_data):
     assert ds["n_gnss"].values.min() >= 8  # GPS 24 + Galileo 24 at a 5 deg mask
 
 
+def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
+    """The kernel's GNSS slots: ``max_visible`` (bounds without an arctangent, exact count
+    where they disagree) equals the largest count of ``look_angles``' valid flags over a grid,
+    also when a wide margin (0.05 rad) sends most rows to the exact count; the bounds bracket
+    that count."""
+    p = STUDY.validate({"lat_deg": "-90:90:15", "lon_deg": "-180:170:20"})
+    ecef, ok, *_ = am.constellation_orbits(p["gps"], p["galileo"], p["duration_s"],
+                                           p["step_s"], p["sky_time"])
+    mask = np.deg2rad(p["mask_deg"])
+    want, differ = 0, 0
+    for la in p["lat_deg"]:
+        rx = geometry.geodetic_to_ecef(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])), 0.0)
+        count = int(np.asarray(look_angles(rx, ecef, ok, mask)[3]).sum(-1).max())
+        want = max(want, count)
+        sure, maybe = am._in_view_bounds(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])),
+                                         0.0, ecef, ok, np.tan(mask - 0.05), np.tan(mask + 0.05))
+        assert int(sure) <= count <= int(maybe)
+        differ += int(sure) != int(maybe)
+    assert differ > 0  # the wide margin sends rows to the exact count
+    args = (p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"], p["lat_deg"],
+            p["lon_deg"], p["height_m"], p["sky_time"])
+    am.max_visible.cache_clear()
+    assert am.max_visible(*args) == want
+    monkeypatch.setattr(am, "_MASK_MARGIN_RAD", 0.05)
+    am.max_visible.cache_clear()
+    assert am.max_visible(*args) == want
+    am.max_visible.cache_clear()
+
+
 def test_every_pl_matches_the_numpy_oracle(small):
     """Each cube entry's HPL, VPL, EMT and sigma_acc against oaraim.reference_mhss on the same
     satellites (look angles from geometry.sky.look_angles, inputs built here from the MAAST

@@ -164,16 +164,61 @@ def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week"):
     return ecef, ok, cons, sv, t_off, "; ".join(desc)
 
 
+#: the elevation margin (rad) of ``max_visible``'s first pass: far above the rounding of an
+#: elevation (~1e-15 rad), far below any real satellite's distance from the mask
+_MASK_MARGIN_RAD = 1e-9
+
+
+@jax.jit
+def _most_in_view(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, mask_rad):
+    """Most satellites in view from the users of one latitude row at any epoch: the count of
+    ``look_angles``' valid flags, as the map kernel sees them."""
+    rx = geometry.geodetic_to_ecef(lat_rad, lons_rad, h_m)  # (n_lon, 3)
+    return jnp.max(jnp.sum(look_angles(rx, sat_ecef, sat_ok, mask_rad)[3], -1))
+
+
+@jax.jit
+def _in_view_bounds(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, tan_lo, tan_hi):
+    """Lower and upper bounds of ``_most_in_view`` without an arctangent per satellite: a
+    satellite counts for the lower bound where its elevation is surely >= the mask (above
+    mask + margin: up >= horizontal x tan_hi) and for the upper bound where it may be (above
+    mask - margin)."""
+    rx = geometry.geodetic_to_ecef(lat_rad, lons_rad, h_m)
+    lat, lon, _ = geometry.ecef_to_geodetic(rx)
+    r = geometry.enu_rotation(lat, lon)[:, :, None, None, :]  # (n_lon, 3, 1, 1, 3)
+    d = [sat_ecef[None, :, :, k] - rx[:, None, None, k] for k in range(3)]  # (n_lon, T, S)
+    e, n, up = (sum(r[:, i, ..., k] * d[k] for k in range(3)) for i in range(3))
+    h2 = e * e + n * n
+
+    def above(t):  # elevation above atan(t): up >= t x horizontal, squared by sign
+        return jnp.where(up >= 0, (t <= 0) | (up * up >= t * t * h2),
+                         (t < 0) & (up * up <= t * t * h2))
+
+    sure = sat_ok & above(tan_hi)
+    maybe = sat_ok & above(tan_lo)
+    return jnp.max(jnp.sum(sure, -1)), jnp.max(jnp.sum(maybe, -1))
+
+
 @functools.lru_cache(maxsize=8)
 def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week"):
-    """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel."""
+    """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel.
+
+    Exactly the count of the map kernel's ``look_angles``: a row whose bounds
+    (``_in_view_bounds``) agree has that count; only a row where a satellite lies within
+    ``_MASK_MARGIN_RAD`` of the mask at the busiest epoch is counted exactly
+    (``_most_in_view``). Measured, the 1 x 1 deg world: 52 s op by op, 21 s compiled with an
+    arctangent per satellite, ~3 s with the bounds."""
     ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time)
-    lo = np.deg2rad(np.asarray(lons))
+    lo = jnp.asarray(np.deg2rad(np.asarray(lons, float)))
+    ecef, ok = jnp.asarray(ecef), jnp.asarray(ok)
+    mask = float(np.deg2rad(mask_deg))
+    tan_lo, tan_hi = (float(np.tan(mask + d)) for d in (-_MASK_MARGIN_RAD, _MASK_MARGIN_RAD))
     most = 0
     for la in lats:
-        rx = geometry.geodetic_to_ecef(np.deg2rad(la), lo, h_m)  # (n_lon, 3)
-        vis = look_angles(rx, ecef, ok, np.deg2rad(mask_deg))[3]  # (n_lon, T, S)
-        most = max(most, int(jnp.max(jnp.sum(vis, -1))))
+        args = (float(np.deg2rad(la)), lo, float(h_m), ecef, ok)
+        sure, maybe = (int(x) for x in _in_view_bounds(*args, tan_lo, tan_hi))
+        if maybe > most:
+            most = max(most, sure if sure == maybe else int(_most_in_view(*args, mask)))
     return most
 
 
