@@ -336,6 +336,32 @@ def test_position_optimization_matches_the_oracle(event_cases):
     assert adjusted >= compared // 2, (adjusted, compared)
 
 
+def test_position_optimization_compact_subbatch_keeps_the_bits(event_cases, monkeypatch):
+    """The adjusted estimator's second solve on a compact sub-batch of the triggered
+    geometries (``entry.OPTIMIZED_SUBBATCH``) gives the bits of the second solve over the
+    whole chunk (the sub-batch limit set to 0): every step is elementwise along the batch.
+    A chunk of 64 with 10 geometries that have sources (the rest: TOO_FEW_SOURCES)."""
+    from oaraim.araim.mhss import entry
+    from oaraim.araim.mhss.inputs import host_inputs
+
+    x = [np.concatenate([a, a[:16]]) for a in event_cases]  # 64 geometries: one chunk
+    x[-1][10:] = False  # all but 10 without sources: at most 10 trigger
+    flat, _ = host_inputs(*x)
+    static = dict(budget=araim.BUDGET_LPV200, max_order=2,
+                  fault_modes=FaultModeRule("add-v4.2"), position_optimization=OPT_ALWAYS)
+
+    def run():  # a new function: traced afresh with the module's current sub-batch limit
+        return jax.jit(lambda *a: entry._protection_levels(*a, **static))(*flat)
+
+    compact = run()
+    monkeypatch.setattr(entry, "OPTIMIZED_SUBBATCH", 0)
+    whole = run()
+    assert 3 <= int(np.sum(np.asarray(compact.position_adjusted))) <= 10
+    for name in compact._fields:
+        np.testing.assert_array_equal(np.asarray(getattr(compact, name)),
+                                      np.asarray(getattr(whole, name)), err_msg=name)
+
+
 def test_position_optimization_by_hand():
     """Closed form: with C_acc = C_int the WLS row s0 is the BLUE, so s0 C (s_k - s0) = 0
     (b = 0) and the accuracy sigma along the move is sqrt(sigma_acc^2 + t^2 sigma_ss,k^2): the

@@ -95,12 +95,24 @@ def batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
             tl(p_sat, 1), tl(p_const, 1), tl(valid, 1))
 
 
+#: geometries of a chunk that ``_optimized_position`` solves a second time in a compact
+#: sub-batch; a chunk with more triggered geometries solves the whole chunk again
+OPTIMIZED_SUBBATCH = 16
+
+
 def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
     """MAAST's use of the Blanch et al. (2015) estimator (``usr_vhpl_araim.m``): tried where
     the baseline is computed, sigma_acc,U < its limit and VPL, HPL or EMT exceeds its target;
     kept (PLs, EMT and sigma_acc together) where its VPL or HPL is lower. Returns (pl,
-    status, emt, sigma_acc_u, adjusted). Chunks where no geometry triggers skip the second
-    solve (``lax.cond``)."""
+    status, emt, sigma_acc_u, adjusted).
+
+    The second solve runs only where a chunk has triggered geometries (``lax.switch``): on
+    up to ``OPTIMIZED_SUBBATCH`` of them gathered into a compact sub-batch (a world map
+    triggers on ~0-1 % of its geometries, so most chunks that trigger at all hold one or
+    two), else on the whole chunk. Every step is elementwise along the batch, so a geometry
+    gets the same bits either way (tested on chunks of 64; XLA may round the lanes past the
+    last full vector of a batch differently, so a batch of at most ``OPTIMIZED_SUBBATCH``
+    geometries is always solved whole)."""
     ok = status == Status.OK
     hpl = jnp.sqrt(pl[0] ** 2 + pl[1] ** 2)
     if opt.keep == "always":
@@ -108,8 +120,11 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
     else:
         trigger = ok & (pr.sigma_acc_u < opt.sigma_acc_max_m[2]) & (
             (pl[2] > opt.vpl_target_m) | (hpl > opt.hpl_target_m) | (emt > opt.emt_target_m))
+    n_batch = trigger.shape[-1]
 
-    def adjusted(_):
+    def solve(pr, pl, emt, args, trigger):
+        """The adjusted PLs where triggered and better, on batch-last arrays of any batch."""
+        hpl = jnp.sqrt(pl[0] ** 2 + pl[1] ** 2)
         pr2 = adjusted_projection(pr, args[2], args[3], args[4], args[7], budget, opt)
         pr2 = pr2._replace(status=jnp.where(trigger, pr2.status, Status.NOT_CONVERGED)
                            .astype(pr2.status.dtype))  # untriggered: not solved
@@ -121,10 +136,27 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
         return (jnp.where(take[None], pl2, pl), jnp.where(take, emt2, emt),
                 jnp.where(take, pr2.sigma_acc_u, pr.sigma_acc_u), take)
 
+    def whole(_):
+        return solve(pr, pl, emt, args, trigger)
+
+    def compact(_):
+        idx = jnp.nonzero(trigger, size=OPTIMIZED_SUBBATCH, fill_value=n_batch)[0]
+        pick = lambda x: jnp.take(x, idx, axis=-1, mode="clip")  # noqa: E731
+        sub = solve(jax.tree.map(pick, pr), pick(pl), pick(emt), [pick(a) for a in args],
+                    pick(trigger) & (idx < n_batch))
+        put = lambda full, part: full.at[..., idx].set(part, mode="drop")  # noqa: E731
+        return tuple(put(f, x) for f, x in zip(
+            (pl, emt, pr.sigma_acc_u, jnp.zeros_like(trigger)), sub, strict=True))
+
     def baseline(_):
         return pl, emt, pr.sigma_acc_u, jnp.zeros_like(trigger)
 
-    pl, emt, sigma_acc_u, take = jax.lax.cond(jnp.any(trigger), adjusted, baseline, None)
+    n_trig = jnp.sum(trigger)
+    # (a batch no larger than the sub-batch solves itself: its bits are those of its own
+    # shape, whose last lanes XLA may round differently from a full vector)
+    few = n_trig <= OPTIMIZED_SUBBATCH if n_batch > OPTIMIZED_SUBBATCH else False
+    branch = jnp.where(n_trig == 0, 0, jnp.where(few, 1, 2))
+    pl, emt, sigma_acc_u, take = jax.lax.switch(branch, (baseline, compact, whole), None)
     return pl, status, emt, sigma_acc_u, take
 
 
