@@ -262,26 +262,46 @@ def gps_kernel(keys, t_az, t_el, t_valid, fault_modes=FAULT_MODES):
             "n_gps": jnp.sum(v, -1)}
 
 
+class _Memo:
+    """A bounded, least-recently-used memo of NumPy results shared by a process's sweep threads
+    (the lock guards the dict only: two threads may compute one entry, with the same bits)."""
+
+    def __init__(self, size):
+        self.size = size
+        self.entries = collections.OrderedDict()
+        self.lock = threading.Lock()
+
+    def get(self, key, compute):
+        """The entry of ``key``, from ``compute()`` (a dict of arrays) when absent."""
+        with self.lock:
+            hit = self.entries.get(key)
+            if hit is not None:
+                self.entries.move_to_end(key)
+                return hit
+        out = {name: np.asarray(v) for name, v in compute().items()}
+        with self.lock:
+            self.entries[key] = out
+            while len(self.entries) > self.size:
+                self.entries.popitem(last=False)
+        return out
+
+
+def keys_digest(keys):
+    """A short hash of a chunk of realization keys: the memos' key for "the same draws"."""
+    return hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
+                           digest_size=16).hexdigest()
+
+
 #: GPS-only results by (sky table, keys): common random numbers make them identical in every
 #: cell, so a process computes them once per chunk of keys (a pure function, memoized)
-_GPS_CACHE = collections.OrderedDict()
-_GPS_CACHE_SIZE = 64
+_GPS_CACHE = _Memo(64)
 
 
 def gps_only(keys, table, table_id, fault_modes=FAULT_MODES):
     """``gps_kernel`` of a chunk of keys, memoized per process: with common random numbers
     every cell of a run shares it."""
-    digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
-                             digest_size=16).hexdigest()
-    k = (table_id, digest, fault_modes)
-    if k not in _GPS_CACHE:
-        out = gps_kernel(keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes)
-        _GPS_CACHE[k] = {name: np.asarray(v) for name, v in out.items()}
-        while len(_GPS_CACHE) > _GPS_CACHE_SIZE:
-            _GPS_CACHE.popitem(last=False)
-    else:
-        _GPS_CACHE.move_to_end(k)
-    return _GPS_CACHE[k]
+    return _GPS_CACHE.get((table_id, keys_digest(keys), fault_modes), lambda: gps_kernel(
+        keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes))
 
 
 def compare(gps, sop):
@@ -305,10 +325,8 @@ def compare(gps, sop):
 
 
 #: GPS + SOP results by (cell parameters but P_s^S, its group of P_s^S values, keys): the cells
-#: of one group share the group's kernel call (``Fig4Cell``); bounded, least recently used
-_SOP_CACHE = collections.OrderedDict()
-_SOP_CACHE_SIZE = 256
-_SOP_LOCK = threading.Lock()
+#: of one group share the group's kernel call (``Fig4Cell``)
+_SOP_CACHE = _Memo(256)
 
 
 def p_s_group(p_s_values, p_s, order, n_gps_slots, n_sops, p_const_sop, fault_modes):
@@ -349,25 +367,13 @@ class Fig4Cell:
 
     def sop(self, keys):
         """The GPS + SOP outputs of this cell's group for ``keys``: {name: (P, chunk)}."""
-        digest = hashlib.blake2b(np.asarray(jax.random.key_data(keys)).tobytes(),
-                                 digest_size=16).hexdigest()
-        k = (self.table_id, self.n_sops, self.args, self.group, self.max_order,
-             self.fault_modes, digest)
-        with _SOP_LOCK:
-            hit = _SOP_CACHE.get(k)
-            if hit is not None:
-                _SOP_CACHE.move_to_end(k)
-                return hit
         sigma, p_const_sop, *annulus = self.args
-        out = sop_kernel(keys, self.jtable["az_rad"], self.jtable["el_rad"],
-                         self.jtable["valid"], self.n_sops, sigma, np.asarray(self.group),
-                         p_const_sop, *annulus, self.max_order, self.fault_modes)
-        out = {name: np.asarray(v) for name, v in out.items()}
-        with _SOP_LOCK:
-            _SOP_CACHE[k] = out
-            while len(_SOP_CACHE) > _SOP_CACHE_SIZE:
-                _SOP_CACHE.popitem(last=False)
-        return out
+        k = (self.table_id, self.n_sops, self.args, self.group, self.max_order,
+             self.fault_modes, keys_digest(keys))
+        return _SOP_CACHE.get(k, lambda: sop_kernel(
+            keys, self.jtable["az_rad"], self.jtable["el_rad"], self.jtable["valid"],
+            self.n_sops, sigma, np.asarray(self.group), p_const_sop, *annulus,
+            self.max_order, self.fault_modes))
 
     def __call__(self, keys):
         gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
