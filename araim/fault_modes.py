@@ -574,9 +574,11 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                 # the slots (E > T: the pairs the folding enumerates) are later in the
                 # enumeration, so they come after a slot when they have as many sources out
                 # or more: all of them after a single, those with n_out >= n_c after c
-                run, rows = tail + _usum(other[L:], 0), [None] * L
+                # (every row stored: stacked unstored, each row's chain of up to E terms was
+                # recomputed inside one scalar loop over the stack, 60 % of the selection)
+                run, rows = linalg.materialize(tail + _usum(other[L:], 0)), [None] * L
                 for l in range(L - 1, -1, -1):
-                    run = run + other[l]
+                    run = linalg.materialize(run + other[l])
                     rows[l] = run
                 for c in range(C):
                     r = tail
@@ -585,7 +587,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                         r = r + jnp.where(after, other[L + d], 0.0)
                     for j in range(T, E):
                         r = r + jnp.where(n_out[j] >= n_c[c], other[j], 0.0)
-                    rows.append(r)
+                    rows.append(linalg.materialize(r))
                 suffix = jnp.stack(rows)
             else:  # E == T: every set is a slot
                 suffix = jnp.broadcast_to(tail, ni.shape)
