@@ -167,6 +167,18 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
     am.max_visible.cache_clear()
 
 
+@pytest.mark.parametrize(("n_sat", "n_slots"), [(48, 23), (7, 3), (5, 5), (1, 1)])
+def test_slots_are_the_stable_argsort_of_visibility(n_sat, n_slots):
+    """The kernel's slot order without a sort (``in_view_first``) is NumPy's stable argsort of
+    ~visible: in-view satellites first, each kind in index order; none, some and all in
+    view."""
+    rng = np.random.default_rng(1)
+    for share in (0.0, 0.3, 0.7, 1.0):
+        vis = rng.random((500, n_sat)) < share
+        want = np.argsort(~vis, axis=-1, kind="stable")[:, :n_slots]
+        np.testing.assert_array_equal(np.asarray(am.in_view_first(vis, n_slots)), want)
+
+
 def test_every_pl_matches_the_numpy_oracle(small):
     """Each cube entry's HPL, VPL, EMT and sigma_acc against oaraim.reference_mhss on the same
     satellites (look angles from geometry.sky.look_angles, inputs built here from the MAAST

