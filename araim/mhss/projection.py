@@ -84,17 +84,7 @@ class Projection(NamedTuple):
     """(B,)."""
 
 
-def _blocks(parts):
-    """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
-    concatenation with the computations of its parts into one loop that branches on every
-    element (measured: a scalar loop, 10x slower than the parts alone); an update slice loops
-    over its part only."""
-    out = jnp.zeros((sum(p.shape[0] for p in parts),) + parts[0].shape[1:], parts[0].dtype)
-    start = 0
-    for p in parts:
-        out = jax.lax.dynamic_update_slice_in_dim(out, p, start, axis=0)
-        start += p.shape[0]
-    return out
+_blocks = linalg.blocks  # concatenation on axis 0 without a branch per element
 
 
 #: sums and maxima over short static axes written out (``linalg.unrolled``)
