@@ -512,7 +512,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     pc = jnp.where(present, p_const, 0.0)
     # (stored: left to itself XLA recomputes these producers inside every consumer)
     ev_ok = jnp.concatenate([valid, present], axis=0)  # (N, B): the events, sources first
-    exists = linalg.materialize(_per_set(ev_ok, ev_ok, ev_ok, jnp.logical_and, r_enum))
+    exists = _per_set(ev_ok, ev_ok, ev_ok, jnp.logical_and, r_enum)
 
     def priors(p_s, p_c):
         """Exact priors P0 prod p / (1 - p) of every set (E, B), as products (no logarithm:
@@ -565,14 +565,13 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                     jnp.asarray(np.arange(C) == c)[:, None], (C,) + lab.shape[1:])], axis=0)
                 first = own_c.at[L:].set(False)
                 inside = _per_set(first, first, own_c, jnp.logical_and, r_enum) & exists
-                f = linalg.materialize(inside & (prior < rule.fc_thres * prior[own[c]][None]))
+                f = inside & (prior < rule.fc_thres * prior[own[c]][None])
                 fold.append(f)
                 mass.append(_usum(jnp.where(f, prior, 0.0), 0))
             for c in range(C):  # the constellation modes' rows only
                 prior = jax.lax.dynamic_update_slice_in_dim(
                     prior, (prior[own[c]] + mass[c])[None], int(own[c]), axis=0)
-            prior = linalg.materialize(prior)
-            cand = linalg.materialize(exists & ~functools.reduce(jnp.logical_or, fold))
+            cand = exists & ~functools.reduce(jnp.logical_or, fold)
         cp = linalg.materialize(jnp.where(cand, prior, 0.0))
         idx = np.arange(E)
         if rule.name == "add-v4.2":
