@@ -123,21 +123,32 @@ def satellites(source, t_gps_s, constellations=("gps", "galileo")):
             np.concatenate(cons), np.concatenate(sv), desc)
 
 
-@jax.jit
-def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
-    """Az, el, range and validity of satellites ``(T, S, 3)`` from receivers ``(..., 3)``.
-
-    Returns arrays ``(..., T, S)``; entries of unusable satellites hold az = el = range = 0.
-    """
+def line_of_sight(receiver_ecef_m, sat_ecef_m):
+    """East, north and up components (m) of the lines of sight from receivers ``(..., 3)`` to
+    satellites ``(T, S, 3)`` (ECEF, metres): three arrays ``(..., T, S)``."""
     rx = jnp.asarray(receiver_ecef_m, jnp.float64)
     lat, lon, _ = ecef_to_geodetic(rx)
     r = enu_rotation(lat, lon)  # (..., 3, 3)
     # line of sight projected on east, north, up: R (sat - rx), as matrix products over T x S
     proj = jnp.einsum("...ik,tsk->...tsi", r, sat_ecef_m)
     proj = proj - jnp.einsum("...ik,...k->...i", r, rx)[..., None, None, :]
-    e, n, u = proj[..., 0], proj[..., 1], proj[..., 2]
+    return proj[..., 0], proj[..., 1], proj[..., 2]
+
+
+def azimuth(east_m, north_m):
+    """Azimuth (rad, [0, 2 pi), clockwise from north) of a line of sight."""
+    return jnp.mod(jnp.arctan2(east_m, north_m), 2.0 * jnp.pi)
+
+
+@jax.jit
+def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
+    """Az, el, range and validity of satellites ``(T, S, 3)`` from receivers ``(..., 3)``.
+
+    Returns arrays ``(..., T, S)``; entries of unusable satellites hold az = el = range = 0.
+    """
+    e, n, u = line_of_sight(receiver_ecef_m, sat_ecef_m)
     horiz = jnp.hypot(e, n)
-    az = jnp.mod(jnp.arctan2(e, n), 2.0 * jnp.pi)
+    az = azimuth(e, n)
     el = jnp.arctan2(u, horiz)
     rng = jnp.hypot(horiz, u)
     usable = jnp.broadcast_to(sat_valid, el.shape)

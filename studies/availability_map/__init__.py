@@ -40,7 +40,7 @@ from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
-from oaraim.geometry.sky import look_angles, resolve_source
+from oaraim.geometry.sky import azimuth, line_of_sight, look_angles, resolve_source
 from oaraim.mc.sweep import Values
 from oaraim.studies.availability_map.inputs import (
     TowerFileError as TowerFileError,  # re-exported: read_towers raises it
@@ -251,6 +251,15 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 # ------------------------------------------------------------------------------------ kernel
 
 
+def _east_north_el(rx, sat_ecef, sat_ok, mask_rad):
+    """One receiver's ``look_angles`` without the azimuths: east and north (m), elevation
+    (0 where unusable), in view, usable; (S,) each."""
+    e, n, u = (x[0] for x in line_of_sight(rx, sat_ecef[None]))
+    el = jnp.arctan2(u, jnp.hypot(e, n))
+    vis = sat_ok & (el >= mask_rad)
+    return e, n, jnp.where(sat_ok, el, 0.0), vis, sat_ok
+
+
 def in_view_first(vis, n_slots):
     """The first ``n_slots`` of ``jnp.argsort(~vis, axis=-1, stable=True)`` for vis (B, S):
     the satellites in view in index order, then the others in index order. Without a sort:
@@ -290,11 +299,14 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
     lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
     t_i = idx % n_t
     rx = geometry.geodetic_to_ecef(lat_rad, lons_rad[lon_i], h_m)  # (B, 3)
-    az, el, _, vis = jax.vmap(lambda r, e, v: tuple(x[0] for x in look_angles(
-        r, e[None], v[None], mask_rad)))(rx, sat_ecef[t_i], sat_ok[t_i])  # (B, S) each
+    # look_angles' elevations and flags; the azimuths only of the slots (an arctangent each)
+    e, n, el, vis, usable = jax.vmap(lambda r, s, v: _east_north_el(
+        r, s, v, mask_rad))(rx, sat_ecef[t_i], sat_ok[t_i])  # (B, S) each
     order = in_view_first(vis, n_slots)
     take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
-    az, el, vis = take(az), take(el), take(vis)
+    usable = take(usable)
+    az = jnp.where(usable, azimuth(take(e), take(n)), 0.0)
+    el, vis = take(el), take(vis)
     const = jnp.take(sat_const, order)
     is_gps = const == GPS
     el = jnp.where(vis, el, jnp.pi / 2)  # padding: finite, harmless, masked
