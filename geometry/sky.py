@@ -140,6 +140,11 @@ def azimuth(east_m, north_m):
     return jnp.mod(jnp.arctan2(east_m, north_m), 2.0 * jnp.pi)
 
 
+def elevation(east_m, north_m, up_m):
+    """Elevation (rad) of a line of sight."""
+    return jnp.arctan2(up_m, jnp.hypot(east_m, north_m))
+
+
 @jax.jit
 def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
     """Az, el, range and validity of satellites ``(T, S, 3)`` from receivers ``(..., 3)``.
@@ -147,10 +152,9 @@ def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
     Returns arrays ``(..., T, S)``; entries of unusable satellites hold az = el = range = 0.
     """
     e, n, u = line_of_sight(receiver_ecef_m, sat_ecef_m)
-    horiz = jnp.hypot(e, n)
     az = azimuth(e, n)
-    el = jnp.arctan2(u, horiz)
-    rng = jnp.hypot(horiz, u)
+    el = elevation(e, n, u)
+    rng = jnp.hypot(jnp.hypot(e, n), u)
     usable = jnp.broadcast_to(sat_valid, el.shape)
     valid = usable & (el >= mask_rad)
     zero = jnp.zeros_like(el)

@@ -20,7 +20,7 @@ from oaraim.araim.error_models import (
 from oaraim.cli import app
 from oaraim.execute import run_study
 from oaraim.geometry.ephemeris import GALILEO
-from oaraim.geometry.sky import look_angles
+from oaraim.geometry.sky import line_of_sight, look_angles
 from oaraim.reference_mhss import protection_levels_reference
 from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am
@@ -165,6 +165,25 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
     am.max_visible.cache_clear()
     assert am.max_visible(*args) == want
     am.max_visible.cache_clear()
+
+
+def test_in_view_flags_are_look_angles_flags(shared_data, monkeypatch):
+    """The kernel's in-view flags without an arctangent (``in_view``) equal ``look_angles``'
+    on a 15 deg grid over a day, both through the squared comparisons and, with a margin of
+    0.05 rad that every batch has satellites within, through the exact branch."""
+    p = STUDY.validate({"lat_deg": "-90:90:15", "lon_deg": "-180:170:20"})
+    ecef, ok, *_ = am.constellation_orbits(p["gps"], p["galileo"], p["duration_s"],
+                                           p["step_s"], p["sky_time"])
+    mask = np.deg2rad(p["mask_deg"])
+    lats, lons = np.meshgrid(np.deg2rad(p["lat_deg"]), np.deg2rad(p["lon_deg"]))
+    rx = geometry.geodetic_to_ecef(lats.ravel(), lons.ravel(), 0.0)
+    want = np.asarray(look_angles(rx, ecef, ok, mask)[3])
+    e, n, u = line_of_sight(rx, ecef)
+    usable = np.broadcast_to(np.asarray(ok), want.shape)
+    assert 0 < want.mean() < 1
+    for margin in (am._MASK_MARGIN_RAD, 0.05):
+        monkeypatch.setattr(am, "_MASK_MARGIN_RAD", margin)
+        np.testing.assert_array_equal(np.asarray(am.in_view(e, n, u, usable, mask)), want)
 
 
 @pytest.mark.parametrize(("n_sat", "n_slots"), [(48, 23), (7, 3), (5, 5), (1, 1)])

@@ -34,13 +34,20 @@ import xarray as xr
 
 from oaraim import data, geometry
 from oaraim.araim import availability as av
+from oaraim.araim import linalg
 from oaraim.araim.batching import jit_kernel
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
-from oaraim.geometry.sky import azimuth, line_of_sight, look_angles, resolve_source
+from oaraim.geometry.sky import (
+    azimuth,
+    elevation,
+    line_of_sight,
+    look_angles,
+    resolve_source,
+)
 from oaraim.mc.sweep import Values
 from oaraim.studies.availability_map.inputs import (
     TowerFileError as TowerFileError,  # re-exported: read_towers raises it
@@ -251,13 +258,23 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 # ------------------------------------------------------------------------------------ kernel
 
 
-def _east_north_el(rx, sat_ecef, sat_ok, mask_rad):
-    """One receiver's ``look_angles`` without the azimuths: east and north (m), elevation
-    (0 where unusable), in view, usable; (S,) each."""
-    e, n, u = (x[0] for x in line_of_sight(rx, sat_ecef[None]))
-    el = jnp.arctan2(u, jnp.hypot(e, n))
-    vis = sat_ok & (el >= mask_rad)
-    return e, n, jnp.where(sat_ok, el, 0.0), vis, sat_ok
+def in_view(e, n, u, usable, mask_rad):
+    """``look_angles``' in-view flags, usable & (elevation >= mask), from the line-of-sight
+    components (``line_of_sight``), without an arctangent per satellite: squared comparisons
+    where the elevation lies more than ``_MASK_MARGIN_RAD`` from the mask (as
+    ``_in_view_bounds``), the elevation itself only in a batch where one lies closer (a
+    branch that a world map practically never takes). Measured on the 1 x 1 deg map's 48
+    satellites: the arctangents were 0.9 us per geometry, 8 % of the kernel."""
+    h2 = e * e + n * n
+
+    def above(t):  # elevation above atan(t): up >= t x horizontal, squared by sign
+        return jnp.where(u >= 0, (t <= 0) | (u * u >= t * t * h2),
+                         (t < 0) & (u * u <= t * t * h2))
+
+    sure = usable & above(jnp.tan(mask_rad + _MASK_MARGIN_RAD))
+    maybe = usable & above(jnp.tan(mask_rad - _MASK_MARGIN_RAD))
+    return jax.lax.cond(jnp.any(sure != maybe),
+                        lambda: usable & (elevation(e, n, u) >= mask_rad), lambda: sure)
 
 
 def in_view_first(vis, n_slots):
@@ -299,14 +316,17 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
     lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
     t_i = idx % n_t
     rx = geometry.geodetic_to_ecef(lat_rad, lons_rad[lon_i], h_m)  # (B, 3)
-    # look_angles' elevations and flags; the azimuths only of the slots (an arctangent each)
-    e, n, el, vis, usable = jax.vmap(lambda r, s, v: _east_north_el(
-        r, s, v, mask_rad))(rx, sat_ecef[t_i], sat_ok[t_i])  # (B, S) each
+    # look_angles' flags, and its azimuths and elevations only of the slots
+    e, n, u = jax.vmap(lambda r, s: tuple(x[0] for x in line_of_sight(r, s[None])))(
+        rx, sat_ecef[t_i])  # (B, S) each
+    usable = sat_ok[t_i]
+    vis = in_view(e, n, u, usable, mask_rad)
     order = in_view_first(vis, n_slots)
     take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
-    usable = take(usable)
-    az = jnp.where(usable, azimuth(take(e), take(n)), 0.0)
-    el, vis = take(el), take(vis)
+    e, n, u, usable, vis = (take(x) for x in (e, n, u, usable, vis))
+    # (stored: fused into the stack of the rows' components it ran twice per slot)
+    az = linalg.materialize(jnp.where(usable, azimuth(e, n), 0.0))
+    el = jnp.where(usable, elevation(e, n, u), 0.0)
     const = jnp.take(sat_const, order)
     is_gps = const == GPS
     el = jnp.where(vis, el, jnp.pi / 2)  # padding: finite, harmless, masked
