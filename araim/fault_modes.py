@@ -58,6 +58,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
+from oaraim.araim.event_sets import event_tails, pad_row, per_set, stored_sum
 
 
 class ModeTemplate(NamedTuple):
@@ -421,19 +422,6 @@ def template_source(rule: FaultModeRule, n_sources: int, n_constellations: int,
     return event_template(n_sources, n_constellations, max_order).sources[:, 0]
 
 
-def _event_tails(p, order: int):
-    """(P(exactly k events) for k = 0..order, P(more than order events)) for independent events
-    p (E, B), as sums of non-negative terms."""
-    dist = [jnp.ones(p.shape[1:])] + [jnp.zeros(p.shape[1:])] * order
-    tail = jnp.zeros(p.shape[1:])
-    for e in range(p.shape[0]):
-        q = p[e]
-        tail = tail + dist[order] * q
-        dist = [dist[0] * (1 - q)] + [dist[k] * (1 - q) + dist[k - 1] * q
-                                      for k in range(1, order + 1)]
-    return dist, tail
-
-
 _usum, _uany, _umax, _umin, _uprod = (linalg.sum_axis, linalg.any_axis, linalg.max_axis,
                                       linalg.min_axis, linalg.prod_axis)
 
@@ -455,50 +443,6 @@ def _event_indices(n_sources: int, n_constellations: int, order: int):
                                        & (tpl.constellations[:, 1] < 0))[0])
                     for c in range(C)], int)
     return src, con, n_src, tpl.order, within, own
-
-
-def _pad(x, value):
-    """x (K, B) with one more row ``value`` (the sentinel slot of ``_event_indices``)."""
-    return jnp.concatenate([x, jnp.full((1,) + x.shape[1:], value, x.dtype)], axis=0)
-
-
-#: ``_stored_sum`` stores its running sum after this many terms
-STORED_SUM_TERMS = 64
-
-
-def _stored_sum(x, start=None):
-    """``_usum(x, 0)`` (or ``start`` + x_0 + x_1 + ..., from the left, with ``start``), the
-    running sum written to a buffer and read back every ``STORED_SUM_TERMS`` terms: the same
-    additions in the same order, in loops of at most that many terms (one fused loop over the
-    hundreds of pairs of the consolidated conventions ran 1.6x slower per term)."""
-    n = x.shape[0]
-    if n == 0:
-        return _usum(x, 0) if start is None else start
-    acc, j = (x[0], 1) if start is None else (start, 0)
-    buf = jnp.zeros((n // STORED_SUM_TERMS + 1,) + x.shape[1:], x.dtype)
-    for k in range(j, n):
-        acc = acc + x[k]
-        if (k + 1) % STORED_SUM_TERMS == 0 and k + 1 < n:
-            i = (k + 1) // STORED_SUM_TERMS
-            buf = jax.lax.dynamic_update_slice_in_dim(buf, acc[None], i, 0)
-            acc = buf[i]
-    return acc
-
-
-def _per_set(single, first, second, op, r_enum, pair=None):
-    """A per-set quantity of ``_event_indices``' sets (E, B), in their order, from per-event
-    arrays (N, B) with the events [sources, constellations]: ``single`` for the one-event
-    sets, then for r_enum = 2 the pairs {i, j > i} as op(first_i, second_j) (or ``pair(i)``,
-    the (N - 1 - i, B) block of the pairs that start with i). Built from blocks by static
-    slices: gathered from padded arrays by the sets' index lists, every (E, B) quantity of the
-    selection ran as a scalar loop (measured: the selection 2.4x slower)."""
-    if r_enum < 2:
-        return single
-    n = single.shape[0]
-    if pair is None:
-        def pair(i):
-            return op(first[i][None], second[i + 1:])
-    return linalg.blocks([single] + [pair(i) for i in range(n - 1)])
 
 
 def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: FaultModeRule,
@@ -527,7 +471,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     s0, s1, c0, c1 = src[:, 0], src[:, 1], con[:, 0], con[:, 1]
 
     lab = jnp.where(valid, constellation, -1)
-    labpad = _pad(lab, -1)
+    labpad = pad_row(lab, -1)
     member = lab[:, None, :] == jnp.arange(C)[None, :, None]  # (L, C, B), valid sources only
     n_c = _usum(member.astype(jnp.int32), 0)  # (C, B)
     present = n_c > 0
@@ -535,7 +479,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     pc = jnp.where(present, p_const, 0.0)
     # (stored: left to itself XLA recomputes these producers inside every consumer)
     ev_ok = jnp.concatenate([valid, present], axis=0)  # (N, B): the events, sources first
-    exists = _per_set(ev_ok, ev_ok, ev_ok, jnp.logical_and, r_enum)
+    exists = per_set(ev_ok, ev_ok, ev_ok, jnp.logical_and, r_enum)
 
     def priors(p_s, p_c):
         """Exact priors P0 prod p / (1 - p) of every set (E, B), as products (no logarithm:
@@ -544,7 +488,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         p0 = _uprod(1.0 - p_s, 0) * _uprod(1.0 - p_c, 0)
         r = jnp.concatenate([p_s / (1.0 - p_s), p_c / (1.0 - p_c)], axis=0)  # (N, B)
         a = linalg.materialize(p0[None] * r)
-        return linalg.materialize(jnp.where(exists, _per_set(a, a, r, jnp.multiply, r_enum),
+        return linalg.materialize(jnp.where(exists, per_set(a, a, r, jnp.multiply, r_enum),
                                             0.0))
 
     full_flag = jnp.zeros(valid.shape[1:], bool)
@@ -553,8 +497,8 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         is_c = jnp.asarray(n_src == 0)[:, None]
         mixed = jnp.asarray((n_src > 0) & (c0 < C))[:, None]
         prior = jnp.where(is_c, priors(jnp.zeros_like(ps), pc), priors(ps, jnp.zeros_like(pc)))
-        dist_s, tail_s = _event_tails(ps, r_enum)
-        dist_c, tail_c = _event_tails(pc, r_enum)
+        dist_s, tail_s = event_tails(ps, r_enum)
+        dist_c, tail_c = event_tails(pc, r_enum)
 
         def family_order(dist, tail, thr):
             tails, above = [], tail  # P(more than k), k = r_enum .. 1
@@ -574,7 +518,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         sel = selected[:T]
     else:
         prior = priors(ps, pc)
-        _, tail = _event_tails(jnp.concatenate([ps, pc], axis=0), r_enum)
+        _, tail = event_tails(jnp.concatenate([ps, pc], axis=0), r_enum)
         cand = exists
         if rule.consolidated:
             # fold every set inside one constellation c (its sources all in c, its
@@ -587,10 +531,10 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                 own_c = jnp.concatenate([lab == c, jnp.broadcast_to(
                     jnp.asarray(np.arange(C) == c)[:, None], (C,) + lab.shape[1:])], axis=0)
                 first = own_c.at[L:].set(False)
-                inside = _per_set(first, first, own_c, jnp.logical_and, r_enum) & exists
+                inside = per_set(first, first, own_c, jnp.logical_and, r_enum) & exists
                 f = inside & (prior < rule.fc_thres * prior[own[c]][None])
                 fold.append(f)
-                mass.append(_stored_sum(jnp.where(f, prior, 0.0)))
+                mass.append(stored_sum(jnp.where(f, prior, 0.0)))
             for c in range(C):  # the constellation modes' rows only
                 prior = jax.lax.dynamic_update_slice_in_dim(
                     prior, (prior[own[c]] + mass[c])[None], int(own[c]), axis=0)
@@ -610,7 +554,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                     return both
                 return both - (lab[i][None] == jnp.asarray(con_of[i + 1:])[:, None])
 
-            n_out = linalg.materialize(_per_set(out, None, None, None, r_enum, pair_out))
+            n_out = linalg.materialize(per_set(out, None, None, None, r_enum, pair_out))
             forced = cand & (prior > budget.phmi_v + budget.phmi_h)
             other = linalg.materialize(jnp.where(forced, 0.0, cp))
             ni = n_out[:T]
@@ -623,7 +567,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                 # or more: all of them after a single, those with n_out >= n_c after c
                 # (every row stored: stacked unstored, each row's chain of up to E terms was
                 # recomputed inside one scalar loop over the stack, 60 % of the selection)
-                run, rows = linalg.materialize(tail + _stored_sum(other[L:])), [None] * L
+                run, rows = linalg.materialize(tail + stored_sum(other[L:])), [None] * L
                 for l in range(L - 1, -1, -1):
                     run = linalg.materialize(run + other[l])
                     rows[l] = run
@@ -632,7 +576,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                     for d in range(C):
                         after = (n_c[d] > n_c[c]) | ((n_c[d] == n_c[c]) & (d >= c))
                         r = r + jnp.where(after, other[L + d], 0.0)
-                    r = _stored_sum(jnp.where(n_out[T:] >= n_c[c][None], other[T:], 0.0), r)
+                    r = stored_sum(jnp.where(n_out[T:] >= n_c[c][None], other[T:], 0.0), r)
                     rows.append(linalg.materialize(r))
                 suffix = jnp.stack(rows)
             else:  # E == T: every set is a slot
@@ -666,7 +610,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                 # the tail and their own mass left
                 full_flag = _uany(cand[T:], 0) & (tail + _usum(cp[T:], 0) > budget.p_thresh)
         p_beyond = (tail + _usum(jnp.where(cand[:T] & ~sel, prior[:T], 0.0), 0)
-                    + _stored_sum(cp[T:]))
+                    + stored_sum(cp[T:]))
     sel = linalg.materialize(sel)
 
     # the slots: exclusion sets, duplicates merged into the first selected one
@@ -688,12 +632,12 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     else:
         # equal exclusion sets by their codes sum_l 2^l (exact in float64 for L <= 52)
         two = 2.0 ** np.arange(L)
-        code_c = _pad(_usum(jnp.where(member, jnp.asarray(two, dtype)[:, None, None], 0.0), 0),
+        code_c = pad_row(_usum(jnp.where(member, jnp.asarray(two, dtype)[:, None, None], 0.0), 0),
                       0.0)
         code = code_c[k0] + code_c[k1]
         for s in (t0, t1):  # a named source not inside a named constellation
             ls = labpad[s]
-            named = jnp.asarray(s < L)[:, None] & _pad(valid, False)[s]
+            named = jnp.asarray(s < L)[:, None] & pad_row(valid, False)[s]
             inside = (ls == jnp.asarray(k0)[:, None]) | (ls == jnp.asarray(k1)[:, None])
             code = code + jnp.where(named & ~inside, jnp.asarray(two[np.minimum(s, L - 1)],
                                                                  dtype)[:, None], 0.0)

@@ -24,6 +24,7 @@ from oaraim.geometry.sky import line_of_sight, look_angles
 from oaraim.reference_mhss import protection_levels_reference
 from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am
+from oaraim.studies.availability_map import slots
 
 STUDY = STUDIES["availability-map"]
 #: two latitude rows x three longitudes x 4 epochs (3 h at 2700 s)
@@ -152,7 +153,7 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
         rx = geometry.geodetic_to_ecef(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])), 0.0)
         count = int(np.asarray(look_angles(rx, ecef, ok, mask)[3]).sum(-1).max())
         want = max(want, count)
-        sure, maybe = am._in_view_bounds(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])),
+        sure, maybe = slots._in_view_bounds(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])),
                                          0.0, ecef, ok, np.tan(mask - 0.05), np.tan(mask + 0.05))
         assert int(sure) <= count <= int(maybe)
         differ += int(sure) != int(maybe)
@@ -161,7 +162,7 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
             p["lon_deg"], p["height_m"], p["sky_time"])
     am.max_visible.cache_clear()
     assert am.max_visible(*args) == want
-    monkeypatch.setattr(am, "_MASK_MARGIN_RAD", 0.05)
+    monkeypatch.setattr(slots, "_MASK_MARGIN_RAD", 0.05)
     am.max_visible.cache_clear()
     assert am.max_visible(*args) == want
     am.max_visible.cache_clear()
@@ -181,8 +182,8 @@ def test_in_view_flags_are_look_angles_flags(shared_data, monkeypatch):
     e, n, u = line_of_sight(rx, ecef)
     usable = np.broadcast_to(np.asarray(ok), want.shape)
     assert 0 < want.mean() < 1
-    for margin in (am._MASK_MARGIN_RAD, 0.05):
-        monkeypatch.setattr(am, "_MASK_MARGIN_RAD", margin)
+    for margin in (slots._MASK_MARGIN_RAD, 0.05):
+        monkeypatch.setattr(slots, "_MASK_MARGIN_RAD", margin)
         np.testing.assert_array_equal(np.asarray(am.in_view(e, n, u, usable, mask)), want)
 
 

@@ -270,6 +270,10 @@ def test_cli_data_nav_refuses_a_download_that_is_not_navigation(shared_data, ser
 
 def test_study_with_auto_sky_and_offline_mirror_exits_2_with_one_line(cache, monkeypatch,
                                                                        tmp_path):
+    from oaraim.studies.common import seed004
+
+    # a seed 004 study run earlier in this process left the day's sky table in memory
+    seed004.gps_sky_table.cache_clear()
     monkeypatch.setenv("OARAIM_DATA", _refused_url())
     r = runner.invoke(app, ["run", "seed004-fig3-one-sop", "--realizations", "1024", "--out",
                             str(tmp_path), "--no-progress"], catch_exceptions=False)
