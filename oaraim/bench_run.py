@@ -62,6 +62,7 @@ def run_bench(parts, quick: bool = False, mhss_batch: int | None = None,
 
         runs = 100 if quick else 1000
         res["ekf_drive"] = e = bench_ekf_drive(runs)
+        e.setdefault("host", hi)  # its date and machine (the table fell back on another row's)
         say(f"EKF-RAIM Monte Carlo, seed 000 drive (1.35 km, 100 Hz IMU), {runs:,} runs, "
             f"without and with exclusion: {e['wall_s']:.1f} s wall, {e['cpu_s']:.1f} s CPU "
             f"(first call with compilation {e['first_call_wall_s']:.1f} s; target 1000 runs "
