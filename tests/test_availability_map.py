@@ -187,6 +187,22 @@ def test_in_view_flags_are_look_angles_flags(shared_data, monkeypatch):
         np.testing.assert_array_equal(np.asarray(am.in_view(e, n, u, usable, mask)), want)
 
 
+def test_map_kernel_bits_do_not_depend_on_the_call_size(shared_data):
+    """The map kernel runs in chunks of 128 realizations (front end included), so one call of
+    2,048 realizations gives the bits of two calls of 1,024 (a sweep's batch size may grow
+    without moving a result)."""
+    import jax
+
+    p = STUDY.validate({"lat_deg": "40", "lon_deg": "-180:170:10"})
+    row = am.MapRow(p, 40.0)
+    key = jax.random.key(0)
+    whole = row(np.arange(2048), key)
+    halves = [row(np.arange(s, s + 1024), key) for s in (0, 1024)]
+    for name, v in whole.items():
+        np.testing.assert_array_equal(
+            np.asarray(v), np.concatenate([np.asarray(h[name]) for h in halves]), err_msg=name)
+
+
 @pytest.mark.parametrize(("n_sat", "n_slots"), [(48, 23), (7, 3), (5, 5), (1, 1)])
 def test_slots_are_the_stable_argsort_of_visibility(n_sat, n_slots):
     """The kernel's slot order without a sort (``in_view_first``) is NumPy's stable argsort of

@@ -34,7 +34,7 @@ import xarray as xr
 from oaraim import geometry
 from oaraim.araim import availability as av
 from oaraim.araim import linalg
-from oaraim.araim.batching import jit_kernel
+from oaraim.araim.batching import jit_kernel, map_chunks
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
@@ -137,6 +137,24 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
                                                 "budget", "requirements", "fault_modes",
                                                 "airborne_model", "position_optimization"))
 def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
+               gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
+               requirements, fault_modes="add-v4.2", airborne_model="add",
+               position_optimization=None):
+    """``_map_chunk`` over ``idx`` (B,) in chunks of ``araim.batching.CHUNK`` realizations
+    (one compiled loop body): a realization's bits do not depend on how many are computed in
+    one call."""
+    def chunk(i):
+        return _map_chunk(i, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const,
+                          mask_rad, gnss, sop, towers, p_const, n_slots=n_slots, n_sops=n_sops,
+                          bpp=bpp, max_order=max_order, budget=budget,
+                          requirements=requirements, fault_modes=fault_modes,
+                          airborne_model=airborne_model,
+                          position_optimization=position_optimization)
+
+    return map_chunks(chunk, [idx], idx.shape)
+
+
+def _map_chunk(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
                gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
                requirements, fault_modes="add-v4.2", airborne_model="add",
                position_optimization=None):
