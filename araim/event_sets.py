@@ -38,9 +38,9 @@ STORED_SUM_TERMS = 64
 def stored_sum(x, start=None):
     """``linalg.sum_axis(x, 0)`` (or ``start`` + x_0 + x_1 + ..., from the left, with
     ``start``), the running sum written to a buffer and read back every ``STORED_SUM_TERMS``
-    terms: the same
-    additions in the same order, in loops of at most that many terms (one fused loop over the
-    hundreds of pairs of the consolidated conventions ran 1.6x slower per term)."""
+    terms: the same additions in the same order, in loops of at most that many terms (one
+    fused loop over the hundreds of pairs of the consolidated conventions ran 1.6x slower per
+    term)."""
     n = x.shape[0]
     if n == 0:
         return linalg.sum_axis(x, 0) if start is None else start

@@ -430,19 +430,17 @@ _usum, _uany, _umax, _umin, _uprod = (linalg.sum_axis, linalg.any_axis, linalg.m
 def _event_indices(n_sources: int, n_constellations: int, order: int):
     """Static description of ``event_template``'s sets for gathers: the two source slots and
     the two constellation slots of each set (E, 2) with the sentinels L and C for "none", the
-    number of sources named (E,), the order (E,), whether the constellations named lie within
-    {c} (E, C), and the index of each constellation's own mode (C,)."""
+    number of sources named (E,), the order (E,) and the index of each constellation's own
+    mode (C,)."""
     tpl = event_template(n_sources, n_constellations, order)
     L, C = n_sources, n_constellations
     src = np.where(tpl.sources >= 0, tpl.sources, L)
     con = np.where(tpl.constellations >= 0, tpl.constellations, C)
     n_src = np.sum(tpl.sources >= 0, axis=1)
-    within = np.stack([np.all((tpl.constellations < 0) | (tpl.constellations == c), axis=1)
-                       for c in range(C)], axis=1)
     own = np.array([int(np.flatnonzero((n_src == 0) & (tpl.constellations[:, 0] == c)
                                        & (tpl.constellations[:, 1] < 0))[0])
                     for c in range(C)], int)
-    return src, con, n_src, tpl.order, within, own
+    return src, con, n_src, tpl.order, own
 
 
 def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: FaultModeRule,
@@ -464,7 +462,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
         raise ValueError(f"fault_modes={rule.name!r} handles at most {MAX_EVENT_SOURCES} "
                          f"sources per geometry, got {L}")
     r_enum = max(max_order, MAX_EVENT_ORDER) if rule.consolidated else max_order
-    src, con, n_src, order_t, within, own = _event_indices(L, C, r_enum)
+    src, con, n_src, order_t, own = _event_indices(L, C, r_enum)
     T = event_template(L, C, max_order).order.size  # slots: the first T sets
     E = order_t.size
     dtype = p_sat.dtype
@@ -477,7 +475,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
     present = n_c > 0
     ps = jnp.where(valid, p_sat, 0.0)
     pc = jnp.where(present, p_const, 0.0)
-    # (stored: left to itself XLA recomputes these producers inside every consumer)
+    # (the per-set arrays are buffers, written block by block: ``per_set``)
     ev_ok = jnp.concatenate([valid, present], axis=0)  # (N, B): the events, sources first
     exists = per_set(ev_ok, ev_ok, ev_ok, jnp.logical_and, r_enum)
 
