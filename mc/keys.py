@@ -11,8 +11,11 @@ was; a new draw gets a new name whose tag range is disjoint from the others used
 same parent key (docs/conventions.md lists them).
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 MAX_REALIZATIONS = 2**32  # fold_in takes a uint32 index
 
@@ -22,17 +25,20 @@ def cell_key(seed: int, cell: int):
     return jax.random.fold_in(jax.random.key(int(seed)), int(cell))
 
 
-@jax.jit
-def _fold_many(base, idx):
+@functools.partial(jax.jit, static_argnames=("seed", "count"))
+def _realization_keys(seed, cell, start, count):
+    base = jax.random.fold_in(jax.random.key(seed), cell)
+    idx = start + jnp.arange(count, dtype=jnp.uint32)
     return jax.vmap(lambda i: jax.random.fold_in(base, i))(idx)
 
 
 def realization_keys(seed: int, cell: int, start: int, count: int):
-    """Keys of realizations ``start .. start + count - 1`` of one cell, shape ``(count,)``."""
+    """Keys of realizations ``start .. start + count - 1`` of one cell, shape ``(count,)``:
+    ``fold_in(cell_key(seed, cell), i)``, in one compiled call (integer arithmetic, the same
+    bits; op by op it was ~0.35 ms a call, a sixth of a seed 004 Fig. 4 cell's host time)."""
     if start < 0 or start + count > MAX_REALIZATIONS:
         raise ValueError(f"realization indices must lie in [0, 2^32), got {start}..{start + count}")
-    idx = jnp.arange(start, start + count, dtype=jnp.uint32)
-    return _fold_many(cell_key(seed, cell), idx)
+    return _realization_keys(int(seed), np.uint32(cell), np.uint32(start), int(count))
 
 
 #: name -> integer tag of the named streams, grouped by the parent key they are derived from;

@@ -39,6 +39,7 @@ counts them in ``_outside``.
 from __future__ import annotations
 
 import collections
+import contextlib
 import hashlib
 import pickle
 import time
@@ -57,6 +58,7 @@ from oaraim.mc.keys import MAX_REALIZATIONS
 from oaraim.mc.reduce import BLOCK, REDUCERS, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import DEFAULT_CHUNK
 from oaraim.mc.sweep_backends import (
+    WarmAhead,
     check_scheduler,
     compute_chunk,
     kernel_outputs,
@@ -370,11 +372,16 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
                         kernels.popitem(last=False)
                 return kernels[c.text]
 
-            if threads > 1 and len(tasks) > 1:
-                run_threads(tasks, kernel_of, args_of, finished, threads)
-            else:
-                for task in tasks:
-                    finished(task, compute_chunk(kernel_of(task), *args_of(task)))
+            warm = contextlib.nullcontext()
+            if tasks and hasattr(kernel_of(tasks[0]), "warm"):
+                order = dict.fromkeys(ci for ci, _, _ in tasks)  # the cells in task order
+                warm = WarmAhead(kernel_factory, [cells[ci].coords for ci in order], batch_size)
+            with warm:
+                if threads > 1 and len(tasks) > 1:
+                    run_threads(tasks, kernel_of, args_of, finished, threads)
+                else:
+                    for task in tasks:
+                        finished(task, compute_chunk(kernel_of(task), *args_of(task)))
         if not covered.all():  # cannot happen: every missing block had a task
             raise RuntimeError("internal error: some blocks of the sweep were never computed")
 

@@ -28,6 +28,19 @@ def test_realization_key_depends_only_on_seed_cell_index():
     assert len({tuple(k) for k in whole}) == 100
 
 
+@pytest.mark.parametrize("seed", [0, 2**31 - 1, 2**40 + 3])
+@pytest.mark.parametrize("cell", [3, 2**31 + 5, 2**32 - 1])
+def test_realization_keys_are_fold_in_of_the_cell_key_op_by_op(seed, cell):
+    """The one compiled call gives the keys of the definition, fold_in(fold_in(key(seed),
+    cell), i), composed op by op, up to the last index 2^32 - 1."""
+    base = jax.random.fold_in(jax.random.key(seed), cell)
+    for start, count in ((0, 5), (2**32 - 3, 3)):
+        want = np.stack([_key_data(jax.random.fold_in(base, i))
+                         for i in range(start, start + count)])
+        np.testing.assert_array_equal(_key_data(realization_keys(seed, cell, start, count)),
+                                      want)
+
+
 def test_realization_index_range_is_checked():
     with pytest.raises(ValueError, match="2\\^32"):
         realization_keys(0, 0, 2**32 - 1, 2)

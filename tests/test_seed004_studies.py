@@ -109,6 +109,27 @@ def test_fig4_common_random_numbers(cell):
     assert not np.array_equal(a["hpl_reduction_m"], b["hpl_reduction_m"])
 
 
+_COMPILE_EVENTS = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, _s, **_kw: _COMPILE_EVENTS.append(event) if "jaxpr_trace" in event else None)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_fig4_cell_warm_compiles_what_its_call_runs(cell):
+    """``warm`` (what mc.sweep runs ahead of a cell) traces and compiles this cell's programs
+    without running them: the call that follows traces nothing. The cell is the P_s^S group
+    of one of the next test, compiled nowhere before."""
+    _, params, coords, keys = cell
+    alone = Fig4Cell({**params, "p_s_sop": (coords["p_s_sop"],)}, coords)
+    _COMPILE_EVENTS.clear()
+    alone.warm(keys.shape[0])
+    assert _COMPILE_EVENTS  # it compiled something
+    other = mc.realization_keys(6, 0, 0, keys.shape[0])  # not the next test's (memoized) keys
+    _COMPILE_EVENTS.clear()
+    alone(other)
+    assert _COMPILE_EVENTS == []
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_fig4_cells_of_a_p_s_group_share_one_kernel_call(cell, monkeypatch):
     """The cells whose P_s^S needs the same order form a group computed by one kernel call:

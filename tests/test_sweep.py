@@ -277,6 +277,38 @@ def test_kernel_built_once_per_cell_and_always_sees_batch_size_keys(tmp_path):
     assert sum(c[0] == "call" for c in _CALLS) == 6 * 2
 
 
+_WARMS = []
+
+
+class _WarmKernel:
+    """The toy kernel with a ``warm`` that records its calls (and raises at a = 2, b = 1.0
+    when ``_WARMS`` starts with "fail")."""
+
+    def __init__(self, coords):
+        self.coords, self.kernel = coords, toy_factory(coords)
+
+    def __call__(self, keys):
+        return self.kernel(keys)
+
+    def warm(self, batch_size):
+        _WARMS.append((self.coords["a"], self.coords["b"], batch_size))
+        if _WARMS[0] == "fail" and (self.coords["a"], self.coords["b"]) == (2, 1.0):
+            raise RuntimeError("warm broke")
+
+
+@pytest.mark.parametrize("fail", [False, True])
+def test_kernels_are_warmed_ahead_in_task_order_and_change_nothing(tmp_path, reference, fail):
+    """A kernel's ``warm`` is called for every cell in task order, with the batch size, from
+    a background thread; the results are the reference's; a warm that raises only stops the
+    warming."""
+    _WARMS[:] = ["fail"] if fail else []
+    res = _sweep(_WarmKernel, AXES, 5000, REDUCERS, seed=3, key_axes=("a",),
+                 out_dir=tmp_path, fingerprint={"toy": 1}, chunk_size=2048, progress=False)
+    xr.testing.assert_identical(res.dataset, reference.dataset)
+    cells = [(a, b, BLOCK) for a in (1, 2, 3) for b in (0.5, 1.0)]
+    assert _WARMS == (["fail"] + cells[:4] if fail else cells)
+
+
 def _chunk_files(out):
     return sorted((out / "chunks").glob("*.npz"))
 

@@ -297,11 +297,20 @@ def keys_digest(keys):
 _GPS_CACHE = _Memo(64)
 
 
+def _gps_args(keys, table, fault_modes):
+    return keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes
+
+
 def gps_only(keys, table, table_id, fault_modes=FAULT_MODES):
     """``gps_kernel`` of a chunk of keys, memoized per process: with common random numbers
     every cell of a run shares it."""
-    return _GPS_CACHE.get((table_id, keys_digest(keys), fault_modes), lambda: gps_kernel(
-        keys, table["az_rad"], table["el_rad"], table["valid"], fault_modes))
+    return _GPS_CACHE.get((table_id, keys_digest(keys), fault_modes),
+                          lambda: gps_kernel(*_gps_args(keys, table, fault_modes)))
+
+
+#: the programs ``Fig4Cell.warm`` compiled in this process
+_WARMED: set = set()
+_WARMED_LOCK = threading.Lock()
 
 
 def compare(gps, sop):
@@ -365,15 +374,32 @@ class Fig4Cell:
         self.group = p_s_group(params.get("p_s_sop", self.p_s), self.p_s, self.max_order,
                                n_slots, self.n_sops, params["p_const_sop"], self.fault_modes)
 
+    def _sop_args(self, keys):
+        sigma, p_const_sop, *annulus = self.args
+        return (keys, self.jtable["az_rad"], self.jtable["el_rad"], self.jtable["valid"],
+                self.n_sops, sigma, np.asarray(self.group), p_const_sop, *annulus,
+                self.max_order, self.fault_modes)
+
     def sop(self, keys):
         """The GPS + SOP outputs of this cell's group for ``keys``: {name: (P, chunk)}."""
-        sigma, p_const_sop, *annulus = self.args
         k = (self.table_id, self.n_sops, self.args, self.group, self.max_order,
              self.fault_modes, keys_digest(keys))
-        return _SOP_CACHE.get(k, lambda: sop_kernel(
-            keys, self.jtable["az_rad"], self.jtable["el_rad"], self.jtable["valid"],
-            self.n_sops, sigma, np.asarray(self.group), p_const_sop, *annulus,
-            self.max_order, self.fault_modes))
+        return _SOP_CACHE.get(k, lambda: sop_kernel(*self._sop_args(keys)))
+
+    def warm(self, batch_size):
+        """Compile, without running, the programs of a call with ``batch_size`` keys (the
+        GPS-only and this cell's GPS + SOP kernels; ``mc.sweep`` warms the cells to come
+        while the chunks run). Each program once per process."""
+        keys = mc.keys.realization_keys(0, 0, 0, batch_size)
+        for kernel, args in ((gps_kernel, _gps_args(keys, self.jtable, self.fault_modes)),
+                             (sop_kernel, self._sop_args(keys))):
+            program = (kernel.__name__, self.table["az_rad"].shape, len(self.group),
+                       self.n_sops, self.max_order, self.fault_modes, batch_size)
+            with _WARMED_LOCK:
+                if program in _WARMED:
+                    continue
+                _WARMED.add(program)
+            kernel.jitted.lower(*args).compile()
 
     def __call__(self, keys):
         gps = gps_only(keys, self.jtable, self.table_id, self.fault_modes)
