@@ -115,11 +115,12 @@ jax.monitoring.register_event_duration_secs_listener(
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
-def test_fig4_cell_warm_compiles_what_its_call_runs(cell):
+def test_fig4_cell_warm_compiles_what_its_call_runs(cell, monkeypatch):
     """``warm`` (what mc.sweep runs ahead of a cell) traces and compiles this cell's programs
     without running them: the call that follows traces nothing. The cell is the P_s^S group
-    of one of the next test, compiled nowhere before."""
+    of one of the next test, compiled nowhere before in this module."""
     _, params, coords, keys = cell
+    monkeypatch.setattr(c, "_WARMED", set())  # what an earlier module's sweeps warmed
     alone = Fig4Cell({**params, "p_s_sop": (coords["p_s_sop"],)}, coords)
     _COMPILE_EVENTS.clear()
     alone.warm(keys.shape[0])

@@ -391,10 +391,11 @@ class Fig4Cell:
         GPS-only and this cell's GPS + SOP kernels; ``mc.sweep`` warms the cells to come
         while the chunks run). Each program once per process."""
         keys = mc.keys.realization_keys(0, 0, 0, batch_size)
-        for kernel, args in ((gps_kernel, _gps_args(keys, self.jtable, self.fault_modes)),
-                             (sop_kernel, self._sop_args(keys))):
-            program = (kernel.__name__, self.table["az_rad"].shape, len(self.group),
-                       self.n_sops, self.max_order, self.fault_modes, batch_size)
+        shape = (self.table["az_rad"].shape, self.fault_modes, batch_size)
+        for kernel, args, program in (
+                (gps_kernel, _gps_args(keys, self.jtable, self.fault_modes), ("gps", *shape)),
+                (sop_kernel, self._sop_args(keys),
+                 ("sop", *shape, len(self.group), self.n_sops, self.max_order))):
             with _WARMED_LOCK:
                 if program in _WARMED:
                     continue
