@@ -111,13 +111,12 @@ class RiskCell:
     def __init__(self, params, n_sops):
         self.p = params
         self.n_sops = int(n_sops)
-        table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
-        self.jtable = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
+        self.jtable = c.gps_sky_arrays(params["nav"], params["mask_deg"], params["sky_step_s"])
         self.S = n_scenarios(params)
         self.x = np.asarray(params["x_grid"], float)
         self.X = 2 * self.x.size  # x A_det, then x A_PL (ir.risk_table)
         self.G = int(params["geometries"])
-        self.max_order = c.order_for(table["az_rad"].shape[1], self.n_sops, params["p_s_sop"],
+        self.max_order = c.order_for(self.jtable["az_rad"].shape[1], self.n_sops, params["p_s_sop"],
                                      params["p_const_sop"], params["fault_modes"])
         self.cache = {}
 
@@ -206,8 +205,7 @@ def per_geometry_risk(ds, G, S, X):
 def geometry_zero_maps(params, key, n_sops, budget, max_order):
     """Geometry 0 of a cell (as ``RiskCell.table`` draws it): (its key, inputs, MonitorMaps,
     the GPS epoch) under ``budget``."""
-    table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
-    jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
+    jt = c.gps_sky_arrays(params["nav"], params["mask_deg"], params["sky_step_s"])
     kg = mc.stream(key, "risk_geometry", 0)
     epoch, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
     m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],

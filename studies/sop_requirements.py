@@ -208,7 +208,7 @@ class SopRequirements(ResumableStudy):
         table, and ``towers(n)``: the n-tower BPP draw padded to the run's largest SOP count
         (memoized; device arrays)."""
         table = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
-        jt = {k: jnp.asarray(table[k]) for k in ("az_rad", "el_rad", "valid")}
+        jt = c.gps_sky_arrays(params["nav"], params["mask_deg"], params["sky_step_s"])
         keys = realization_keys(int(seed), 0, 0, int(realizations))
         gps = c.gps_kernel(keys, jt["az_rad"], jt["el_rad"], jt["valid"], params["fault_modes"])
         _, az, el, v = jax.vmap(lambda k: c.draw_gps(k, jt["az_rad"], jt["el_rad"],

@@ -274,6 +274,7 @@ def test_study_with_auto_sky_and_offline_mirror_exits_2_with_one_line(cache, mon
 
     # a seed 004 study run earlier in this process left the day's sky table in memory
     seed004.gps_sky_table.cache_clear()
+    seed004.gps_sky_arrays.cache_clear()
     monkeypatch.setenv("OARAIM_DATA", _refused_url())
     r = runner.invoke(app, ["run", "seed004-fig3-one-sop", "--realizations", "1024", "--out",
                             str(tmp_path), "--no-progress"], catch_exceptions=False)
