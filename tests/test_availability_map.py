@@ -140,10 +140,11 @@ def test_grid_sky_matches_geometry_sky(small, shared_data):
 
 
 def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
-    """The kernel's GNSS slots: ``max_visible`` (bounds without an arctangent, exact count
-    where they disagree) equals the largest count of ``look_angles``' valid flags over a grid,
-    also when a wide margin (0.05 rad) sends most rows to the exact count; the bounds bracket
-    that count."""
+    """The kernel's GNSS slots: ``max_visible`` (upper bounds of every row first, then bounds
+    without an arctangent, exact count where they disagree) equals the largest count of
+    ``look_angles``' valid flags over a grid, also when a wide margin (0.05 rad) sends most
+    rows to the exact count; the bounds bracket that count and the one-pass upper bound is
+    the bounds' upper one."""
     p = STUDY.validate({"lat_deg": "-90:90:15", "lon_deg": "-180:170:20"})
     ecef, ok, *_ = am.constellation_orbits(p["gps"], p["galileo"], p["duration_s"],
                                            p["step_s"], p["sky_time"])
@@ -156,6 +157,8 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
         sure, maybe = slots._in_view_bounds(np.deg2rad(la), np.deg2rad(np.asarray(p["lon_deg"])),
                                          0.0, ecef, ok, np.tan(mask - 0.05), np.tan(mask + 0.05))
         assert int(sure) <= count <= int(maybe)
+        assert int(slots._most_maybe_in_view(np.deg2rad(la), np.deg2rad(np.asarray(
+            p["lon_deg"])), 0.0, ecef, ok, np.tan(mask - 0.05))) == int(maybe)
         differ += int(sure) != int(maybe)
     assert differ > 0  # the wide margin sends rows to the exact count
     args = (p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"], p["lat_deg"],

@@ -97,19 +97,34 @@ def _most_in_view(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, mask_rad):
     return jnp.max(jnp.sum(look_angles(rx, sat_ecef, sat_ok, mask_rad)[3], -1))
 
 
+def _row_enu(lat_rad, lons_rad, h_m, sat_ecef):
+    """East, north, up of every satellite from every user of a latitude row, (n_lon, T, S)
+    each: ``line_of_sight``'s components, unnormalised."""
+    rx = geometry.geodetic_to_ecef(lat_rad, lons_rad, h_m)
+    lat, lon, _ = geometry.ecef_to_geodetic(rx)
+    r = geometry.enu_rotation(lat, lon)[:, :, None, None, :]  # (n_lon, 3, 1, 1, 3)
+    d = [sat_ecef[None, :, :, k] - rx[:, None, None, k] for k in range(3)]  # (n_lon, T, S)
+    return tuple(sum(r[:, i, ..., k] * d[k] for k in range(3)) for i in range(3))
+
+
 @jax.jit
 def _in_view_bounds(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, tan_lo, tan_hi):
     """Lower and upper bounds of ``_most_in_view`` without an arctangent per satellite: a
     satellite counts for the lower bound where its elevation is surely >= the mask (above
     mask + margin: up >= horizontal x tan_hi) and for the upper bound where it may be (above
     mask - margin)."""
-    rx = geometry.geodetic_to_ecef(lat_rad, lons_rad, h_m)
-    lat, lon, _ = geometry.ecef_to_geodetic(rx)
-    r = geometry.enu_rotation(lat, lon)[:, :, None, None, :]  # (n_lon, 3, 1, 1, 3)
-    d = [sat_ecef[None, :, :, k] - rx[:, None, None, k] for k in range(3)]  # (n_lon, T, S)
-    e, n, up = (sum(r[:, i, ..., k] * d[k] for k in range(3)) for i in range(3))
-    sure, maybe = _mask_bounds(e, n, up, sat_ok, tan_lo, tan_hi)
+    sure, maybe = _mask_bounds(*_row_enu(lat_rad, lons_rad, h_m, sat_ecef), sat_ok, tan_lo,
+                               tan_hi)
     return jnp.max(jnp.sum(sure, -1)), jnp.max(jnp.sum(maybe, -1))
+
+
+@jax.jit
+def _most_maybe_in_view(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, tan_lo):
+    """The upper bound of ``_in_view_bounds`` alone, in one fused pass (int32 counts):
+    measured on the 1 x 1 deg world, 0.9 s for the 181 rows against 5.8 s for both bounds."""
+    e, n, up = _row_enu(lat_rad, lons_rad, h_m, sat_ecef)
+    maybe = _mask_bounds(e, n, up, sat_ok, tan_lo, tan_lo)[1]
+    return jnp.max(jnp.sum(maybe, -1, dtype=jnp.int32))
 
 
 def _mask_bounds(e, n, u, usable, tan_lo, tan_hi):
@@ -129,22 +144,26 @@ def _mask_bounds(e, n, u, usable, tan_lo, tan_hi):
 def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week"):
     """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel.
 
-    Exactly the count of the map kernel's ``look_angles``: a row whose bounds
-    (``_in_view_bounds``) agree has that count; only a row where a satellite lies within
-    ``_MASK_MARGIN_RAD`` of the mask at the busiest epoch is counted exactly
-    (``_most_in_view``). Measured, the 1 x 1 deg world: 52 s op by op, 21 s compiled with an
-    arctangent per satellite, 8.5 s with the bounds."""
+    Exactly the count of the map kernel's ``look_angles``. Every row's upper bound first
+    (``_most_maybe_in_view``); then, rows in decreasing bound until no bound exceeds the count
+    found, each row's count: its bounds (``_in_view_bounds``) where they agree, the exact count
+    (``_most_in_view``) only where a satellite lies within ``_MASK_MARGIN_RAD`` of the mask at
+    the busiest epoch. Measured, the 1 x 1 deg world: 52 s op by op, 21 s compiled with an
+    arctangent per satellite, 5.8 s with both bounds of every row, ~1 s with this order."""
     ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time)
     lo = jnp.asarray(np.deg2rad(np.asarray(lons, float)))
     ecef, ok = jnp.asarray(ecef), jnp.asarray(ok)
     mask = float(np.deg2rad(mask_deg))
     tan_lo, tan_hi = (float(np.tan(mask + d)) for d in (-_MASK_MARGIN_RAD, _MASK_MARGIN_RAD))
+    rows = [(float(np.deg2rad(la)), lo, float(h_m), ecef, ok) for la in lats]
+    bound = [_most_maybe_in_view(*args, tan_lo) for args in rows]  # dispatched, then read
+    bound = np.array([int(b) for b in bound])
     most = 0
-    for la in lats:
-        args = (float(np.deg2rad(la)), lo, float(h_m), ecef, ok)
-        sure, maybe = (int(x) for x in _in_view_bounds(*args, tan_lo, tan_hi))
-        if maybe > most:
-            most = max(most, sure if sure == maybe else int(_most_in_view(*args, mask)))
+    for i in np.argsort(-bound, kind="stable"):
+        if bound[i] <= most:
+            break
+        sure, maybe = (int(x) for x in _in_view_bounds(*rows[i], tan_lo, tan_hi))
+        most = max(most, sure if sure == maybe else int(_most_in_view(*rows[i], mask)))
     return most
 
 
