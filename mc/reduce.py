@@ -450,8 +450,9 @@ class Values(_Stream):
         state["values"][b0 * BLOCK:b0 * BLOCK + v.size] = v
 
     def finish(self, state):
-        """The dataset variables of one cell from its state."""
-        return {self.name: state["values"][:self.n].copy()}
+        """The dataset variables of one cell from its state: a view of it (the state is not
+        used after; ``mc.sweep`` copies the cells into one array and frees the states)."""
+        return {self.name: state["values"][:self.n]}
 
 
 #: the reducer types ``mc.sweep.run_sweep`` accepts

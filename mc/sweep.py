@@ -411,6 +411,11 @@ def _dataset(axes, shape, cells, reducers, states, realizations, seed, key_axes)
             for c, res in zip(cells, per_cell, strict=True):
                 arr[c.index] = res[var]
             data[var] = (dims + tuple(extra), arr)
+        # freed now, so that the next reducer's arrays can reuse the memory (a 1 x 1 deg map
+        # keeps 0.7 GB of values; see oaraim.config.small_pages_for_numpy)
+        del per_cell
+        for st in states:
+            st[i] = None
         if hasattr(r, "coords"):
             coords.update(r.coords())
     import xarray as xr  # ~0.3 s to import: here, not on `import oaraim.mc`

@@ -425,7 +425,11 @@ def data_nav(
 
 
 def main():
-    """The ``oaraim`` console script: the Typer app, Ctrl-C as one line and exit status 130."""
+    """The ``oaraim`` console script: the Typer app, Ctrl-C as one line and exit status 130.
+    NumPy's large arrays on small pages (``config.small_pages_for_numpy``)."""
+    from oaraim import config
+
+    config.small_pages_for_numpy()
     try:
         app()
     except KeyboardInterrupt:
