@@ -38,9 +38,9 @@ NUMPY_HUGEPAGE_ENV = "NUMPY_MADVISE_HUGEPAGE"
 
 
 def small_pages_for_numpy() -> bool:
-    """Turn off NumPy's transparent-huge-page advice for its large arrays in this process,
-    unless ``NUMPY_MADVISE_HUGEPAGE`` says otherwise; True when turned off. The ``oaraim``
-    command calls it at start.
+    """Turn off NumPy's transparent-huge-page advice for its large arrays in this process and
+    the processes it starts (``NUMPY_MADVISE_HUGEPAGE=0``), unless ``NUMPY_MADVISE_HUGEPAGE``
+    is set already; True when turned off. The ``oaraim`` command calls it at start.
 
     Why: a huge page must be a free 2 MiB block, and on a virtual machine whose host backs
     guest memory lazily (this project's machines) such blocks are often memory the guest has
@@ -52,6 +52,7 @@ def small_pages_for_numpy() -> bool:
     hint, never a result)."""
     if os.environ.get(NUMPY_HUGEPAGE_ENV) is not None:
         return False
+    os.environ[NUMPY_HUGEPAGE_ENV] = "0"  # for the processes it starts (reproduce's jobs)
     import numpy as np
 
     setter = getattr(getattr(getattr(np, "_core", None), "multiarray", None),

@@ -188,6 +188,7 @@ def test_the_command_puts_numpy_on_small_pages_unless_the_user_chose(monkeypatch
     """``oaraim`` turns NumPy's huge-page advice off at start (``config.small_pages_for_numpy``,
     docs/benchmarks.md: assembling a 1 x 1 deg map's 0.7 GB went 10 -> ~1 s); a user's
     ``NUMPY_MADVISE_HUGEPAGE`` is left to NumPy."""
+    import os
     import sys
 
     import numpy as np
@@ -197,13 +198,15 @@ def test_the_command_puts_numpy_on_small_pages_unless_the_user_chose(monkeypatch
     ma = np._core.multiarray
     before = ma._get_madvise_hugepage()
     try:
-        monkeypatch.delenv(config.NUMPY_HUGEPAGE_ENV, raising=False)
+        monkeypatch.setenv(config.NUMPY_HUGEPAGE_ENV, "unset below, absent again after")
+        monkeypatch.delenv(config.NUMPY_HUGEPAGE_ENV)
         ma._set_madvise_hugepage(True)
         monkeypatch.setattr(sys, "argv", ["oaraim", "list"])
         with pytest.raises(SystemExit) as exit_:
             cli.main()
         assert exit_.value.code in (0, None)
         assert not ma._get_madvise_hugepage()
+        assert os.environ[config.NUMPY_HUGEPAGE_ENV] == "0"  # reproduce's spawned jobs too
         ma._set_madvise_hugepage(True)
         monkeypatch.setenv(config.NUMPY_HUGEPAGE_ENV, "1")
         assert config.small_pages_for_numpy() is False
