@@ -48,6 +48,7 @@ from oaraim.araim.mhss.projection import (
     adjusted_projection,
     finish_projection,
     mode_solutions,
+    position_rows,
     project,
 )
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
@@ -122,6 +123,11 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
             (pl[2] > opt.vpl_target_m) | (hpl > opt.hpl_target_m) | (emt > opt.emt_target_m))
     n_batch = trigger.shape[-1]
 
+    def rows(pr):
+        """S^(i) built inside the branch that reads it (``project(lazy_rows=True)``), from
+        the whole chunk's pieces: the same bits as building it for every chunk."""
+        return pr._replace(s_pos=position_rows(pr), rows=None)
+
     def solve(pr, pl, emt, args, trigger):
         """The adjusted PLs where triggered and better, on batch-last arrays of any batch."""
         hpl = jnp.sqrt(pl[0] ** 2 + pl[1] ** 2)
@@ -137,12 +143,12 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
                 jnp.where(take, pr2.sigma_acc_u, pr.sigma_acc_u), take)
 
     def whole(_):
-        return solve(pr, pl, emt, args, trigger)
+        return solve(rows(pr), pl, emt, args, trigger)
 
     def compact(_):
         idx = jnp.nonzero(trigger, size=OPTIMIZED_SUBBATCH, fill_value=n_batch)[0]
         pick = lambda x: jnp.take(x, idx, axis=-1, mode="clip")  # noqa: E731
-        sub = solve(jax.tree.map(pick, pr), pick(pl), pick(emt), [pick(a) for a in args],
+        sub = solve(jax.tree.map(pick, rows(pr)), pick(pl), pick(emt), [pick(a) for a in args],
                     pick(trigger) & (idx < n_batch))
         put = lambda full, part: full.at[..., idx].set(part, mode="drop")  # noqa: E731
         return tuple(put(f, x) for f, x in zip(
@@ -186,7 +192,7 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
     more = higher_order_flags(args[7], args[1], args[5], args[6], budget, fault_modes, max_order) \
         if order_flags else None
     pr = project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags,
-                  fault_modes=fault_modes)
+                  fault_modes=fault_modes, lazy_rows=position_optimization is not None)
     if input_flags:
         pr, flags = pr
     pl, status, emt = pls_from_projection(pr, budget, iterations)
