@@ -129,6 +129,7 @@ _blocks = linalg.blocks  # concatenation on axis 0 without a branch per element
 #: sums and maxima over short static axes written out (``linalg.unrolled``)
 _sum = linalg.sum_axis
 _max = linalg.max_axis
+_any = linalg.any_axis
 
 
 def _normal(cols, w, axis):
@@ -261,9 +262,16 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     ``_single_rows``).
     """
     L = w_int.shape[0]
-    u = [linalg.materialize(sum(inv0[q][a][None] * gt[a] for a in range(3)))
-         for q in range(3)]  # (L, B)
     memf = member.astype(w_int.dtype)
+    # a source alone in its constellation: its centred row is zero (to rounding), all its
+    # information goes to its own clock, r_l = 0; excluding it removes that clock too and
+    # leaves the all-in-view position solution, S^(l) = S^(0) (seed 004 Theorem 1): a
+    # solvable mode with zero separation, not a singular one. u_l = 0 exactly there.
+    n_c = _sum(memf, 0)  # (C, B) valid members
+    lone = _any(member & (n_c == 1.0)[None], 1)  # (L, B)
+    u = [linalg.materialize(jnp.where(lone, 0.0, sum(inv0[q][a][None] * gt[a]
+                                                      for a in range(3))))
+         for q in range(3)]  # (L, B)
     same = sum(memf[:, None, c] * memf[None, :, c] for c in range(member.shape[1]))  # (L, L, B)
     p = sum(gt[a][:, None, :] * u[a][None, :, :] for a in range(3)) + same * inv_s_src[:, None]
     s0 = jnp.stack([w_int * u[q] for q in range(3)], axis=0)  # (3, L, B)
@@ -273,7 +281,8 @@ def _single_modes(w_int, gt, inv_s_src, member, b_nom, var_acc, inv0, var0):
     r_safe = jnp.where(ok, r, 1.0)
     eye = jnp.eye(L, dtype=bool)[:, :, None]
     c = linalg.materialize(
-        jnp.where(eye, 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :]))
+        jnp.where(eye | lone[:, None], 0.0, (w_int / r_safe)[:, None, :] * p * w_int[None, :, :]))
+    ok = ok | lone
     u_pos = jnp.stack(u, axis=1)  # (L, 3, B): u_l,q
     s_pos = _single_rows(s0, u_pos, c, ok)
     var_pos = var0[None] + u_pos**2 * (w_int / r_safe)[:, None, :]
