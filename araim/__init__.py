@@ -24,6 +24,14 @@ from oaraim.araim.budget import (
     exposure_probability,
 )
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table, noncentrality
+from oaraim.araim.epoch import (
+    ISM_GALILEO,
+    ISM_GPS,
+    ISM_SOP,
+    EpochLevels,
+    Ism,
+    epoch_protection_levels,
+)
 from oaraim.araim.fault_modes import CONVENTIONS as FAULT_MODE_CONVENTIONS
 from oaraim.araim.fault_modes import FaultModeRule
 from oaraim.araim.fde import (
@@ -51,8 +59,13 @@ __all__ = [
     "BUDGET_LPV200",
     "BUDGET_LPV200_MAAST",
     "BUDGET_SEED004_TABLE_I",
+    "EpochLevels",
     "FAULT_MODE_CONVENTIONS",
     "FDEResult",
+    "ISM_GALILEO",
+    "ISM_GPS",
+    "ISM_SOP",
+    "Ism",
     "FaultModeRule",
     "IntegrityBudget",
     "MHSSResult",
@@ -61,6 +74,7 @@ __all__ = [
     "Sources",
     "detect_and_exclude",
     "detect_and_exclude_kernel",
+    "epoch_protection_levels",
     "error_models",
     "exposure_probability",
     "protection_levels",

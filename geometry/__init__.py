@@ -33,7 +33,7 @@ from oaraim.geometry.frames import (
 from oaraim.geometry.nominal import galileo_walker, gps_24_slot
 from oaraim.geometry.random_sky import Towers, bpp_towers, random_sky
 from oaraim.geometry.rows import geometry_rows, geometry_rows_enu
-from oaraim.geometry.sky import Sky, sky
+from oaraim.geometry.sky import Sky, ephemeris_gaps, look_angles, satellites, sky
 from oaraim.geometry.sp3 import PreciseOrbits, SP3Error, read_sp3
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "PreciseOrbits", "SP3Error", "Sky", "Towers", "az_el_from_rotation", "azimuth_elevation",
     "bpp_towers",
     "earth_rotation_correction", "ecef_to_enu", "ecef_to_geodetic", "enu_rotation",
+    "ephemeris_gaps", "look_angles", "satellites",
     "enu_to_ecef", "galileo_walker", "geodetic_to_ecef", "geometry_rows", "geometry_rows_enu",
     "gps_24_slot", "gpstime", "load_navigation", "normal_gravity_mps2", "random_sky", "read_sem",
     "read_sp3",
