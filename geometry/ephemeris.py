@@ -1,7 +1,9 @@
 """GPS and Galileo broadcast ephemerides from RINEX 2 / 3 navigation files.
 
-Parsing: georinex (plain or gzipped files), after a structural check of our own that names the
-file and line of anything malformed or truncated (georinex's own errors do not). The
+Parsing: after a check of our own that names the file and line of anything malformed or
+truncated, RINEX 2 files by georinex, RINEX 3 files by field position
+(``geometry.rinex_nav3``: georinex drops merged-file records that leave optional fields blank).
+Plain or gzipped files. The
 propagation is ours (``geometry.kepler``: IS-GPS-200 20.3.3.4.3; Galileo OS SIS ICD 5.1.1),
 vectorized over epochs x satellites in JAX.
 
@@ -42,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.constants import MU_GAL_M3_S2, MU_GPS_M3_S2
-from oaraim.geometry import gpstime
+from oaraim.geometry import gpstime, rinex_nav3
 from oaraim.geometry.kepler import (
     F_GAL_S_SQRT_M,
     F_GPS_S_SQRT_M,
@@ -65,7 +67,7 @@ DEFAULT_MAX_AGE_S = 4 * 3600.0
 SQRT_A_RANGE = (5000.0, 5700.0)
 E_MAX = 0.3
 
-#: RINEX 3 lines per navigation record by system (RINEX 3.03 Tables A6-A14)
+#: RINEX 3 systems of navigation records (lines per record: ``rinex_nav3.record_lines``)
 _RINEX3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
 _FIELD = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([EeD][-+]?\d+)?\s*$")
 _INT = re.compile(r"^\s*[-+]?\d+\s*$")
@@ -114,25 +116,6 @@ def _check_fields(path, lineno, line, start, n_fields, required=()):
 #: per data line 1..7: IODE/IODnav and the orbit (Crs .. OmegaDot), IDOT, the health word
 _REQUIRED_KEPLER = {1: (0, 1, 2, 3), 2: (0, 1, 2, 3), 3: (0, 1, 2, 3), 4: (0, 1, 2, 3),
                     5: (0,), 6: (1,)}
-
-
-#: RINEX 3 GPS / Galileo record layouts georinex maps field by field (fields per line; the
-#: BROADCAST ORBIT 5 and 7 lines may omit spares): anything else is refused, not misread
-_FULL_LINES = (3, 4, 4, 4, 4, None, 4, None)
-_LAST_LINES = {"G": {(4, 1), (4, 2), (4, 3), (4, 4)}, "E": {(3, 1), (4, 1), (4, 2), (4, 4)}}
-
-
-def _check_layout(path, k, sysch, slots):
-    for j, full in enumerate(_FULL_LINES):
-        if full is not None and slots[j] != full:
-            raise NavigationFileError(
-                f"{path}: line {k + j + 1}: {slots[j]} fields where a {_SYSTEM_NAMES[sysch]} "
-                f"record line holds {full}; the line is cut short or garbled")
-    if (slots[5], slots[7]) not in _LAST_LINES[sysch]:
-        raise NavigationFileError(
-            f"{path}: line {k + 6}: {slots[5]} and {slots[7]} fields on the record's lines 6 "
-            f"and 8 (lines {k + 6}, {k + 8}), a layout of a {_SYSTEM_NAMES[sysch]} record this "
-            "reader does not know; the record is cut short or garbled")
 
 
 def _check_epoch(path, lineno, date, rinex3):
@@ -218,7 +201,7 @@ def _check_navigation_text(path: Path, text: str) -> dict:
                     f"{path}: line {k + 1}, columns {a + 1}-{b}: cannot read {field.strip()!r} "
                     f"as a number in the header record {lines[k][60:80].strip()!r}")
     k, records, systems = end + 1, 0, set()
-    seen_text, seen_key, layout, index = {}, {}, {}, []
+    seen_text, seen_key, index = {}, {}, []
     while k < len(lines):
         line = lines[k]
         if not line.strip():
@@ -230,7 +213,8 @@ def _check_navigation_text(path: Path, text: str) -> dict:
                 raise NavigationFileError(
                     f"{path}: line {k + 1}: expected a record start 'Snn YYYY MM DD hh mm ss' "
                     f"(system letter and satellite number), got {line[:23]!r}")
-            n_lines, first_start, data_start = _RINEX3_LINES[sysch], 23, 4
+            n_lines = rinex_nav3.record_lines(sysch, version)
+            first_start, data_start = 23, 4
         else:
             sysch = "G"
             if not line[0:2].strip().isdigit():
@@ -247,10 +231,10 @@ def _check_navigation_text(path: Path, text: str) -> dict:
         toc_s = _check_epoch(path, k + 1, date, rinex3)
         kepler = n_lines == 8
         if rinex3:
-            _check_fields(path, k + 1, line, first_start, 3)
+            clock = _check_fields(path, k + 1, line, first_start, 3)
             required = _REQUIRED_KEPLER if kepler else {}
         else:  # georinex reads every field of a RINEX 2 record but the last line's spares
-            _check_fields(path, k + 1, line, first_start, 3, (0, 1, 2))
+            clock = _check_fields(path, k + 1, line, first_start, 3, (0, 1, 2))
             required = {j: (0, 1, 2, 3) for j in range(1, 7)} | {7: (0,)}
         for j in range(n_lines):
             text = lines[k + j]
@@ -278,21 +262,9 @@ def _check_navigation_text(path: Path, text: str) -> dict:
                 raise NavigationFileError(
                     f"{path}: line {k + 3}, columns {col + 1}-{col + 19}: sqrt(A) {sqrt_a!r} is "
                     "not positive: not an orbit (re-download the file or fix that record)")
-        if rinex3:  # georinex joins the lines' fields: each record of a satellite alike
-            slots = tuple(-(-max(len(lines[k + j].rstrip()) - (first_start if j == 0 else
-                                                             data_start), 0) // 19)
-                          for j in range(n_lines))
-            if sysch in ("G", "E"):
-                _check_layout(path, k, sysch, slots)
-            sv_name = line[:3]
-            first = layout.setdefault(sv_name, (slots, k + 1))
-            if first[0] != slots:
-                j = next(j for j in range(n_lines) if slots[j] != first[0][j])
-                raise NavigationFileError(
-                    f"{path}: line {k + j + 1}: {slots[j]} fields where the same line of the "
-                    f"first record of {sv_name} (line {first[1]}) has {first[0][j]}; the line is "
-                    "cut short or garbled")
-        text = tuple(s.rstrip() for s in lines[k:k + n_lines])
+        # a record is its values, not its layout: optional fields written or left blank, lines
+        # cut after their last field (merged files mix contributors' layouts)
+        text = (line[:3], date, rinex_nav3.record_meaning(sysch, clock + sum(orbit, [])))
         if text in seen_text:
             raise NavigationFileError(
                 f"{path}: line {k + 1}: the record of {line[:3].strip()} repeats the record at "
@@ -321,7 +293,7 @@ def _check_navigation_text(path: Path, text: str) -> dict:
         raise NavigationFileError(f"{path}: line {len(lines)}: the file has a header but no "
                                   "navigation records")
     return {"version": version, "records": records, "systems": sorted(systems),
-            "index": index}
+            "index": index, "header_lines": end + 1}
 
 
 _SYSTEM_NAMES = {"G": "GPS", "E": "Galileo"}
@@ -329,7 +301,8 @@ _SYSTEM_NAMES = {"G": "GPS", "E": "Galileo"}
 
 @functools.lru_cache(maxsize=4)
 def georinex_navigation(path_str: str, mtime_ns: int, size: int, systems: tuple):
-    """(``check_navigation_file`` info, georinex Dataset of the ``systems`` records present),
+    """(``check_navigation_file`` info, Dataset of the ``systems`` records present: georinex's
+    for RINEX 2, ``rinex_nav3.navigation_dataset`` (the same shape) for RINEX 3),
     cached per (file, mtime, size, systems): the one place a navigation file is parsed, shared
     by ``load_navigation`` and ``geometry.rinex_obs.navigation_extras``.
 
@@ -350,8 +323,10 @@ def georinex_navigation(path_str: str, mtime_ns: int, size: int, systems: tuple)
         warnings.simplefilter("ignore")  # georinex/xarray FutureWarnings on merge defaults
         try:
             # georinex reads the checked text, not the file: the same lines, a BOM dropped
-            ds = (georinex.load(io.StringIO(text), use=use) if info["version"] >= 3
-                  else georinex.load(io.StringIO(text)))
+            ds = (rinex_nav3.navigation_dataset(text.split("\n"), info["index"], use,
+                                                info["version"], info["header_lines"],
+                                                Path(path_str).name)
+                  if info["version"] >= 3 else georinex.load(io.StringIO(text)))
         except Exception as e:  # georinex raises assorted types; one message for the user
             raise NavigationFileError(f"{path_str}: georinex could not parse the file "
                                       f"({type(e).__name__}: {e})") from None
