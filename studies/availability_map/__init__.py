@@ -234,7 +234,7 @@ class MapRow:
         p = params
         ecef, ok, cons, _, t_off, _ = constellation_orbits(p["gps"], p["galileo"],
                                                            p["duration_s"], p["step_s"],
-                                                           p["sky_time"])
+                                                           p["sky_time"], p["allow_gaps"] == "yes")
         self.lat_rad = np.deg2rad(float(lat_deg))
         self.h_m = float(p["height_m"])
         self.mask_rad = float(np.deg2rad(p["mask_deg"]))
@@ -280,7 +280,8 @@ def _layout(key):
         base[i] if p[k] == "preset" else (np.inf if p[k] == "none" else float(p[k]))
         for i, k in enumerate(("val_m", "hal_m", "emt_m", "sigma_acc_m"))))
     n_slots = max_visible(p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"],
-                          p["lat_deg"], p["lon_deg"], p["height_m"], p["sky_time"])
+                          p["lat_deg"], p["lon_deg"], p["height_m"], p["sky_time"],
+                          p["allow_gaps"] == "yes")
     n_slots = max(n_slots, 1)
     if p["towers"] != "none":
         n_carriers = len(read_towers(p["towers"])[4])
@@ -372,6 +373,9 @@ class AvailabilityMap(SweepStudy):
                   "YUMA/SEM almanac or RINEX navigation file"),
         "galileo": _p("auto", parse_orbits(GALILEO_ALMANAC),
                       f"Galileo orbits: auto ({GALILEO_ALMANAC}), nominal, none, or a file"),
+        "allow_gaps": _p("no", parse_choice("no", "yes"), "yes: map the epochs a navigation "
+                         "file does not cover (few or no satellites there) instead of refusing "
+                         "the file"),
         "sky_time": _p("week", parse_choice(*SKY_TIMES), "epoch 0 of an almanac: week (MAAST: "
                        "every almanac at the same time of its GPS week, from its start) or toa "
                        "(each from its own earliest time of applicability)"),
@@ -477,7 +481,7 @@ class AvailabilityMap(SweepStudy):
         req = lay["requirements"]
         *_, sky_desc = constellation_orbits(params["gps"], params["galileo"],
                                             params["duration_s"], params["step_s"],
-                                            params["sky_time"])
+                                            params["sky_time"], params["allow_gaps"] == "yes")
         avail = av.availability(cube["available"][1], axis=-1)
         hpl995 = av.pl_percentile(cube["hpl_m"][1], 99.5)
         vpl995 = av.pl_percentile(cube["vpl_m"][1], 99.5)

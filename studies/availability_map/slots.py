@@ -35,7 +35,7 @@ SKY_TIMES = ("week", "toa")
 
 
 @functools.lru_cache(maxsize=4)
-def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week"):
+def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week", allow_gaps=False):
     """Satellite ECEF ``(T, S, 3)``, usable mask ``(T, S)``, constellation codes ``(S,)``,
     satellite names, epoch offsets ``(T,)`` (s from the start) and a description.
 
@@ -45,7 +45,10 @@ def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week"):
     the sky of one common time. ``"toa"``: each almanac from its own earliest time of
     applicability (the sky closest to its epoch). A navigation file runs from 00:00 of the day
     holding most of its records, a nominal constellation from its reference epoch, in both.
-    The offsets are the epochs of the map: 0, step_s, ... < duration_s.
+    The offsets are the epochs of the map: 0, step_s, ... < duration_s. A navigation file
+    that does not cover them (``geometry.ephemeris_gaps``: a file cut short, or of fewer
+    hours than the map) is refused in one line naming the file and the epochs, unless
+    ``allow_gaps`` (the map then counts those epochs as they are: few or no satellites).
     """
     if sky_time not in SKY_TIMES:
         raise ValueError(f"sky_time must be one of {', '.join(SKY_TIMES)}, got {sky_time!r}")
@@ -71,6 +74,15 @@ def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week"):
             else:  # a nominal constellation: its own reference epoch
                 t0 = float(getattr(o, "reference_t_gps_s", 0.0))
             e, v, sv = o.sat_position_ecef(t0 + t_off, prns=o.prns[keep])
+            gaps = geometry.ephemeris_gaps(v, np.full(int(keep.sum()), code))
+            if isinstance(o, Ephemeris) and gaps.any() and not allow_gaps:
+                bad = np.flatnonzero(gaps)
+                raise ValueError(
+                    f"{name}={Path(src).name}: no usable orbits for most satellites at "
+                    f"{bad.size} of {t_off.size} map epochs (from {t_off[bad[0]] / 3600:.2f} h "
+                    f"to {t_off[bad[-1]] / 3600:.2f} h after the day's start); the file ends "
+                    "early or covers fewer hours than duration_s: use a whole day's file, a "
+                    "shorter duration_s, or --set allow_gaps=yes to map them as they are")
             parts.append((np.asarray(e), np.asarray(v), np.full(int(keep.sum()), code),
                           np.asarray(sv)))
         desc.append(f"{name}: {Path(src).name if src not in (nominal,) else src}")
@@ -141,7 +153,8 @@ def _mask_bounds(e, n, u, usable, tan_lo, tan_hi):
 
 
 @functools.lru_cache(maxsize=8)
-def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week"):
+def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week",
+                allow_gaps=False):
     """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel.
 
     Exactly the count of the map kernel's ``look_angles``. Every row's upper bound first
@@ -150,7 +163,7 @@ def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky
     (``_most_in_view``) only where a satellite lies within ``_MASK_MARGIN_RAD`` of the mask at
     the busiest epoch. Measured, the 1 x 1 deg world: 52 s op by op, 21 s compiled with an
     arctangent per satellite, 5.8 s with both bounds of every row, ~1 s with this order."""
-    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time)
+    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time, allow_gaps)
     lo = jnp.asarray(np.deg2rad(np.asarray(lons, float)))
     ecef, ok = jnp.asarray(ecef), jnp.asarray(ok)
     mask = float(np.deg2rad(mask_deg))
