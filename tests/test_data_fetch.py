@@ -522,7 +522,7 @@ def test_test_suite_without_a_source_skips_naming_files_or_fails_when_required(c
     url = _refused_url()
     rc, out = _pytest_data_test({"OARAIM_DATA": url}, cache)
     assert rc == 0 and "1 skipped" in out, out
-    assert "real GNSS files unavailable (15 of 15 failed; looked in the mirror" in out
+    assert "real GNSS files unavailable (21 of 21 failed; looked in the mirror" in out
     rc, out = _pytest_data_test({"OARAIM_DATA": url, "OARAIM_REQUIRE_DATA": "1"}, cache)
     assert rc == 1 and "1 error" in out, out  # the fixture fails: the test is an error
     assert "Connection refused" in out and "(OARAIM_REQUIRE_DATA=1)" in out
