@@ -70,7 +70,13 @@ from oaraim.geometry.imu import ImuSpec, vn100  # noqa: E402
 __all__ += ["ImuSpec", "clocks", "imu", "vn100"]
 
 from oaraim.geometry import atmosphere, rinex_obs  # noqa: E402
-from oaraim.geometry.rinex_obs import ObservationFileError, Observations, read_observations  # noqa: E402
+from oaraim.geometry.observation_table import ObservationTable  # noqa: E402
+from oaraim.geometry.rinex_obs import (  # noqa: E402
+    ObservationFileError,
+    Observations,
+    read_observation_table,
+    read_observations,
+)
 
-__all__ += ["ObservationFileError", "Observations", "atmosphere", "read_observations",
-            "rinex_obs"]
+__all__ += ["ObservationFileError", "ObservationTable", "Observations", "atmosphere",
+            "read_observation_table", "read_observations", "rinex_obs"]

@@ -1,5 +1,16 @@
 """RINEX 2/3 observation files: a strict reader of the observation format.
 
+Forms read: plain text, gzip (``.gz``), Hatanaka-compressed RINEX (CRINEX 1 / 3, ``.crx``,
+``.d``), alone or under gzip or Unix compress, decoded with the ``hatanaka`` package (the
+maintained decoder; a truncated or garbled CRINEX file is an error naming the file and the
+CRINEX line the decoder stopped at). Errors inside the decoded text name lines of that text
+("line 1234 of the decompressed text"). One file or several of one receiver (hourly files of a
+day): ``read_observation_table([a, b, ...])``.
+
+``read_observation_table``: every observation of every system and type the header declares
+(``geometry.observation_table.ObservationTable``: GPS, Galileo, BeiDou, GLONASS, QZSS, SBAS,
+NavIC; code, carrier, Doppler, C/N0), NaN where blank.
+
 Reading (``read_observations``): our own reader of the RINEX 2.11 / 3.04 observation format
 (RINEX 2.11 Table A2, RINEX 3.04 Table A3), strict by default: every header record it uses,
 every epoch line, satellite list and F14.3 observation field is checked, each epoch must have
@@ -10,8 +21,8 @@ epoch without a word and named no line). ``lenient=True`` skips such epochs and 
 one (``ObservationFileWarning``). Returns arrays: GPS times of the epochs
 (receiver time tags; RINEX observation epochs are in GPS time for GPS files), satellite ids,
 L1 code pseudoranges (RINEX 2: C1, gaps filled from P1; RINEX 3: C1C, then C1W / C1P / C1X)
-and the header's APPROX POSITION XYZ. Only GPS is read: Galileo E1 would need its own group
-delay (BGD) and the shared files hold GPS only.
+and the header's APPROX POSITION XYZ. ``read_observations`` keeps GPS only (the L1 replay);
+Galileo E1 needs its own group delay (BGD), the later dual-frequency replay's work.
 
 The GNSS pseudorange model of real-data replay (navigation extras, transmit-time satellite
 states, Sagnac, receiver terms) is ``geometry.pseudorange_model``; its names are re-exported
@@ -20,17 +31,17 @@ here, where the replay has always found them.
 
 import datetime
 import functools
-import gzip
 import math
 import os
 import re
 import warnings
-import zlib
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from oaraim.geometry import rinex_text
+from oaraim.geometry.observation_table import ObservationTable, decode_fields, merge_tables
 from oaraim.geometry.pseudorange_model import (  # noqa: F401  (re-exported: the replay's API)
     NavigationExtras,
     ReceiverTerms,
@@ -103,26 +114,11 @@ class _Bad(Exception):
         self.lineno, self.message = lineno, message
 
 
-def _read_lines(path: Path) -> tuple[list[str], bool]:
-    """The file's lines (plain or .gz; a UTF-8 byte-order mark dropped; bytes that are not ASCII
-    become U+FFFD so that they fail every field check) and whether it ends with a line break."""
-    try:
-        if path.suffix == ".gz":
-            with gzip.open(path, "rb") as f:
-                raw = f.read()
-        else:
-            raw = path.read_bytes()
-    except (OSError, EOFError, zlib.error) as e:
-        raise ObservationFileError(f"{path}: cannot read the file ({e}); check the path and "
-                                   "that a .gz file is complete") from None
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    text = raw.decode("ascii", errors="replace")
-    lines = text.split("\n")
-    ends = text.endswith("\n")
-    if ends:
-        lines.pop()
-    return [s[:-1] if s.endswith("\r") else s for s in lines], ends
+def _read_lines(path: Path) -> rinex_text.RinexText:
+    """The file's lines in any form (``geometry.rinex_text``), whether it ends with a line
+    break, whether it was CRINEX (the lines are then those of the decoded text) and what the
+    CRINEX decoder skipped."""
+    return rinex_text.read_lines(path, ObservationFileError)
 
 
 def _epoch_seconds(lineno, text, year, month, day, hour, minute, second):
@@ -201,7 +197,7 @@ def _parse_header(path: Path, lines: list[str]) -> dict:
     header = lines[:end + 1]
     types: dict = {}
     approx, marker, interval = None, "", None
-    last_obs = None
+    last_obs, time_system = None, (0, "")
     k = 0
     while k < len(header):
         line = header[k]
@@ -226,6 +222,8 @@ def _parse_header(path: Path, lines: list[str]) -> dict:
                                            "seconds")
         elif label == "TIME OF LAST OBS":
             last_obs = (k + 1, line)
+        elif label == "TIME OF FIRST OBS":
+            time_system = (k + 1, line[48:51].strip())
         elif label == "# / TYPES OF OBSERV" and version < 3:
             if "G" in types:
                 raise ObservationFileError(f"{path}: line {k + 1}: a second '# / TYPES OF "
@@ -260,23 +258,31 @@ def _parse_header(path: Path, lines: list[str]) -> dict:
         except _Bad as e:
             raise ObservationFileError(f"{path}: line {lineno}: {e.message}") from None
     return {"version": version, "types": types, "approx_position": approx, "marker": marker,
-            "header_lines": len(header), "interval": interval, "last_obs": last_obs}
+            "header_lines": len(header), "interval": interval, "last_obs": last_obs,
+            "time_system": time_system}
 
 
 def check_observation_file(path) -> dict:
     """Structural check of a RINEX 2/3 observation header.
 
     Returns ``{"version", "types" (per system letter, list of observables), "approx_position"
-    ((3,) or None), "marker", "header_lines", "interval" (s or None), "last_obs"}``. Raises
-    ``ObservationFileError`` naming the file and the line or header record that is missing or
-    malformed, or an empty body.
+    ((3,) or None), "marker", "header_lines", "interval" (s or None), "last_obs",
+    "time_system" ((line, TIME OF FIRST OBS time system))}``. Raises ``ObservationFileError``
+    naming the file and the line or header record that is missing or malformed, or an empty
+    body (for a CRINEX file, lines of its decompressed text).
     """
     path = Path(path)
-    lines, _ = _read_lines(path)
-    info = _parse_header(path, lines)
-    if not any(s.strip() for s in lines[info["header_lines"]:]):
-        raise ObservationFileError(f"{path}: line {info['header_lines'] + 1}: no observation "
-                                   "epochs after the header (empty or truncated file)")
+    lines, _, crinex, _ = _read_lines(path)
+    try:
+        info = _parse_header(path, lines)
+        if not any(s.strip() for s in lines[info["header_lines"]:]):
+            raise ObservationFileError(f"{path}: line {info['header_lines'] + 1}: no "
+                                       "observation epochs after the header (empty or "
+                                       "truncated file)")
+    except ObservationFileError as e:
+        if crinex:
+            raise ObservationFileError(rinex_text.decoded_lines(str(e))) from None
+        raise
     return info
 
 
@@ -298,17 +304,9 @@ def _check_values(lineno, line, start, n_fields, max_fields):
                    f"{tail.strip()[:20]!r} after the last observation field")
 
 
-def _values(line, start, indices):
-    """Observation values at field ``indices`` of one satellite's fields (NaN where blank)."""
-    out = []
-    for i in indices:
-        v = line[start + 16 * i:start + 16 * i + 14].strip()
-        out.append(float(v) if v else math.nan)
-    return out
-
-
-def _epoch_v2(path, lines, k, n_types, want):
-    """One RINEX 2 epoch starting at index ``k``: (next index, time or None, {sv: values})."""
+def _epoch_v2(path, lines, k, n_types):
+    """One RINEX 2 epoch starting at index ``k``: (next index, time or None, {sv: the
+    satellite's checked fields, 16 columns each})."""
     line = lines[k]
     m = _EPOCH2.match(line)
     if m is None:
@@ -370,7 +368,7 @@ def _epoch_v2(path, lines, k, n_types, want):
             fields = min(5, n_types - 5 * r)
             _check_values(j + r + 1, row, 0, fields, fields)
         if flag != 6:  # flag 6: cycle-slip records, not observations
-            data[s] = _values("".join(f"{row:80s}"[:80] for row in rows), 0, want)
+            data[s] = "".join(f"{row:80s}"[:80] for row in rows)
         j += lines_per_sat
     return j, (None if flag == 6 else t), data
 
@@ -388,8 +386,9 @@ def _skip_records(lines, k, n, what):
     return k + 1 + n
 
 
-def _epoch_v3(path, lines, k, types, want):
-    """One RINEX 3 epoch starting at index ``k``: (next index, time or None, {sv: values})."""
+def _epoch_v3(path, lines, k, types):
+    """One RINEX 3 epoch starting at index ``k``: (next index, time or None, {sv: the
+    satellite's checked fields, 16 columns each})."""
     line = lines[k]
     m = _EPOCH3.match(line)
     if m is None:
@@ -429,24 +428,22 @@ def _epoch_v3(path, lines, k, types, want):
         seen.add(s)
         nf = len(types[s[0]])
         _check_values(j + 1, row, 3, nf, nf)
-        if flag != 6 and s[0] == "G":
-            data[s] = _values(row, 3, want)
+        if flag != 6:
+            data[s] = row[3:]
     return k + 1 + n, (None if flag == 6 else t), data
 
 
-def _parse_body(path: Path, lines, ends_with_newline, info, codes, lenient):
-    """Every epoch of the body checked; the values of ``codes`` for GPS satellites.
+def _parse_body(path: Path, lines, ends_with_newline, info, lenient):
+    """Every epoch of the body checked.
 
-    Returns ``(t (T,), sv (S,), {code: (T, S) NaN where absent}, skipped)``; in strict mode the
-    first problem raises ``ObservationFileError`` naming the line, in lenient mode the epoch
-    holding it is skipped and ``skipped`` gets one message per skipped epoch.
+    Returns ``(t (T,), epoch lines (T,), [{sv: fields text}] per epoch, skipped)``; in strict
+    mode the first problem raises ``ObservationFileError`` naming the line, in lenient mode the
+    epoch holding it is skipped and ``skipped`` gets one message per skipped epoch.
     """
     v3 = info["version"] >= 3
-    gps_types = info["types"].get("G", [])
-    want = [gps_types.index(c) for c in codes]  # field indices of the codes
-    n_types = len(gps_types)
+    n_types = len(info["types"].get("G", []))  # RINEX 2: the one list of the header
     epoch_re = _EPOCH3 if v3 else _EPOCH2
-    times, rows, skipped = [], [], []
+    times, starts, rows, skipped = [], [], [], []
     last_t, last_line = -math.inf, 0
     k = info["header_lines"]
     if not ends_with_newline and lines and lines[-1].strip():
@@ -463,9 +460,9 @@ def _parse_body(path: Path, lines, ends_with_newline, info, codes, lenient):
         start = k
         try:
             if v3:
-                k, t, data = _epoch_v3(path, lines, k, info["types"], want)
+                k, t, data = _epoch_v3(path, lines, k, info["types"])
             else:
-                k, t, data = _epoch_v2(path, lines, k, n_types, want)
+                k, t, data = _epoch_v2(path, lines, k, n_types)
             if problem is not None and k >= problem[0]:
                 raise _Bad(*problem)
             if t is not None and t <= last_t:
@@ -483,25 +480,114 @@ def _parse_body(path: Path, lines, ends_with_newline, info, codes, lenient):
             continue
         if t is not None:
             times.append(t)
+            starts.append(start + 1)
             rows.append(data)
             last_t, last_line = t, start + 1
-    svs = sorted({s for r in rows for s in r if s[0] == "G"})
-    col = {s: j for j, s in enumerate(svs)}
-    values = {c: np.full((len(times), len(svs)), np.nan) for c in codes}
-    for i, r in enumerate(rows):
-        for s, vals in r.items():
-            if s in col:
-                for c, v in zip(codes, vals, strict=True):
-                    values[c][i, col[s]] = v
-    return np.asarray(times, np.float64), np.array(svs, dtype=str), values, skipped
+    return np.asarray(times, np.float64), np.asarray(starts, np.int64), rows, skipped
+
+
+#: time systems whose epochs are GPS time (RINEX 3.04 Table A2: GST, QZSST and IRNSST are
+#: steered to GPS time; GLONASS time is UTC(SU) + 3 h and BDT is 14 s behind GPS time)
+_GPS_ALIGNED = ("", "GPS", "GAL", "QZS", "IRN")
 
 
 @functools.lru_cache(maxsize=8)
-def _parsed_obs(path_str, mtime_ns, size, lenient):
-    """(header info, L1 codes, parsed body) of a file, cached per (file, mtime, size, lenient)."""
+def _file_table(path_str, mtime_ns, size, lenient) -> ObservationTable:
+    """The ``ObservationTable`` of one file, cached per (file, mtime, size, lenient); the
+    messages of a CRINEX file's decoded text name its lines as such."""
     p = Path(path_str)
-    lines, ends = _read_lines(p)
-    info = _parse_header(p, lines)
+    lines, ends, crinex, notes = _read_lines(p)
+    if notes and not lenient:  # the CRINEX decoder went past a garbled epoch
+        raise ObservationFileError(notes[0])
+    try:
+        info = _parse_header(p, lines)
+        t, starts, rows, skipped = _parse_body(p, lines, ends, info, lenient)
+        if t.size == 0:
+            why = "all skipped" if skipped else "empty or truncated file"
+            raise ObservationFileError(f"{p}: line {info['header_lines'] + 1}: no observation "
+                                       f"epochs after the header ({why})")
+        last = info["last_obs"]
+        if last is not None and t[-1] < last[1] - 1.0:
+            msg = (f"{p}: line {last[0]}: TIME OF LAST OBS is {last[1] - t[-1]:.0f} s after "
+                   "the last epoch of the file: the file is truncated")
+            if not lenient:
+                raise ObservationFileError(msg)
+            skipped = [*skipped, msg]
+        ts = info["time_system"]
+        if ts[1] not in _GPS_ALIGNED:
+            raise ObservationFileError(
+                f"{p}: line {ts[0]}: TIME OF FIRST OBS: the epochs are in {ts[1]} time; this "
+                "reader takes time tags in GPS time (GPS, GAL, QZS, IRN)")
+    except ObservationFileError as e:
+        if crinex:
+            raise ObservationFileError(rinex_text.decoded_lines(str(e))) from None
+        raise
+    if crinex:
+        skipped = [*notes, *(rinex_text.decoded_lines(m) for m in skipped)]
+    v3 = info["version"] >= 3
+    svs, values, lli = decode_fields(info["types"], rows, v3)
+    types = (info["types"] if v3 else
+             {sysch: info["types"]["G"] for sysch in sorted({s[0] for s in svs}) or ["G"]})
+    return ObservationTable(t, svs, {k: tuple(v) for k, v in types.items()}, values, lli,
+                            starts, np.zeros(t.size, np.int64), info["approx_position"],
+                            info["interval"], info["version"], info["marker"], (str(p),),
+                            tuple(skipped))
+
+
+def _existing(path) -> Path:
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise ObservationFileError(f"observation file {str(path)!r} not found; give an existing "
+                                   "RINEX 2/3 observation file (plain, .gz or CRINEX)")
+    return p
+
+
+def _as_paths(path) -> list:
+    if isinstance(path, (str, os.PathLike)):
+        return [path]
+    paths = list(path)
+    if not paths:
+        raise ObservationFileError("no observation file given")
+    return paths
+
+
+def read_observation_table(path, lenient=False) -> ObservationTable:
+    """Every observation of a RINEX 2/3 observation file, or of several files of one receiver.
+
+    Forms: plain, gzip, CRINEX 1/3 (Hatanaka), CRINEX in gzip or compress. Every line is
+    checked as ``read_observations`` checks it; every system and observation type the header
+    declares is read (``ObservationTable``: one ``(T, S)`` array per type, NaN where blank).
+
+    Args:
+      path: a file, or a sequence of files of one receiver (one station, one interval, not
+        overlapping in time; any order).
+      lenient: skip bad epochs instead of failing; each skipped epoch gives an
+        ``ObservationFileWarning`` naming the file and line and is listed in ``skipped``.
+
+    Raises:
+      ObservationFileError: (a ValueError) naming the file, the line (for a CRINEX file, of its
+        decompressed text, or the CRINEX line the decoder stopped at) and what is wrong.
+    """
+    tables = []
+    for one in _as_paths(path):
+        p = _existing(one)
+        st = os.stat(p)
+        tables.append(_file_table(str(p.resolve()), st.st_mtime_ns, st.st_size, bool(lenient)))
+    table = tables[0] if len(tables) == 1 else merge_tables(tables, ObservationFileError)
+    for msg in table.skipped:
+        warnings.warn(msg, ObservationFileWarning, stacklevel=2)
+    return table
+
+
+def _l1_codes(path) -> tuple:
+    """The GPS L1 code observables of a file's header, in order of preference; an error naming
+    the file when it has none (checked before the body, as the header is all it takes)."""
+    p = _existing(path)
+    lines, _, crinex, _ = _read_lines(p)
+    try:
+        info = _parse_header(p, lines)
+    except ObservationFileError as e:
+        raise ObservationFileError(rinex_text.decoded_lines(str(e)) if crinex else str(e)) from None
     have = info["types"].get("G", [])
     prefs = RINEX2_L1_CODES if info["version"] < 3 else RINEX3_L1_CODES
     codes = tuple(c for c in prefs if c in have)
@@ -509,11 +595,12 @@ def _parsed_obs(path_str, mtime_ns, size, lenient):
         raise ObservationFileError(
             f"{p}: no GPS L1 code observable: the header lists {have or 'no GPS observables'}; "
             f"need one of {', '.join(prefs)}")
-    return info, codes, _parse_body(p, lines, ends, info, codes, lenient)
+    return codes
 
 
 def read_observations(path, max_epochs=None, lenient=False) -> Observations:
-    """GPS L1 code pseudoranges of a RINEX 2/3 observation file (plain or .gz).
+    """GPS L1 code pseudoranges of a RINEX 2/3 observation file (plain, .gz or CRINEX), or of
+    several files of one receiver (``read_observation_table``).
 
     Every line is checked (epoch lines, satellite lists, the F14.3 observation fields, the
     number of lines each epoch announces, strictly increasing epoch times, a final line
@@ -521,7 +608,7 @@ def read_observations(path, max_epochs=None, lenient=False) -> Observations:
     never a silently shorter result.
 
     Args:
-      path: the observation file.
+      path: the observation file, or a sequence of files.
       max_epochs: keep only the first this many epochs (None: all; the whole file is checked).
       lenient: skip bad epochs instead of failing; each skipped epoch gives an
         ``ObservationFileWarning`` naming the file and line and is listed in ``skipped``.
@@ -535,43 +622,32 @@ def read_observations(path, max_epochs=None, lenient=False) -> Observations:
         missing file, a bad header, no GPS L1 code observable (C1 / P1 or C1C / C1W / ...), a
         malformed or truncated epoch, no epochs.
     """
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise ObservationFileError(f"observation file {str(path)!r} not found; give an existing "
-                                   "RINEX 2/3 observation file (plain or .gz)")
-    st = os.stat(p)
-    info, codes, (t, svs, data, skipped) = _parsed_obs(str(p.resolve()), st.st_mtime_ns,
-                                                       st.st_size, bool(lenient))
-    for msg in skipped:
-        warnings.warn(msg, ObservationFileWarning, stacklevel=2)
-    if t.size == 0:
-        why = "all skipped" if skipped else "empty or truncated file"
-        raise ObservationFileError(f"{p}: line {info['header_lines'] + 1}: no observation "
-                                   f"epochs after the header ({why})")
-    last = info["last_obs"]
-    if last is not None and t[-1] < last[1] - 1.0:
-        msg = (f"{p}: line {last[0]}: TIME OF LAST OBS is {last[1] - t[-1]:.0f} s after the "
-               "last epoch of the file: the file is truncated")
-        if not lenient:
-            raise ObservationFileError(msg)
-        warnings.warn(msg, ObservationFileWarning, stacklevel=2)
-        skipped = [*skipped, msg]
+    paths = _as_paths(path)
+    codes = tuple(dict.fromkeys(c for one in paths for c in _l1_codes(one)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        table = read_observation_table(paths, lenient)
+    for w in caught:
+        warnings.warn(w.message, w.category, stacklevel=2)
+    gps = table.select("G")
+    t, svs, skipped = gps.t_gps_s, gps.sv, table.skipped
     pr = np.full((t.size, svs.size), np.nan)
     used = []
     for c in codes:  # preferred code first, later codes only fill its gaps
-        x = data[c]
+        x = gps.values[c]
         fill = ~np.isfinite(pr) & np.isfinite(x)
         if fill.any():
             pr[fill] = x[fill]
             used.append(c)
     ok = np.isfinite(pr) & (pr > PSEUDORANGE_SPAN_M[0]) & (pr < PSEUDORANGE_SPAN_M[1])
     keep_sv = ok.any(0)
+    where = ", ".join(table.paths)
     if not keep_sv.any():
-        raise ObservationFileError(f"{p}: no plausible GPS {'/'.join(codes)} pseudoranges "
+        raise ObservationFileError(f"{where}: no plausible GPS {'/'.join(codes)} pseudoranges "
                                    f"(18,000-30,000 km) in {t.size} epochs")
     pr, ok = pr[:, keep_sv], ok[:, keep_sv]
     if max_epochs is not None:
         t, pr, ok = t[:max_epochs], pr[:max_epochs], ok[:max_epochs]
     return Observations(t, svs[keep_sv], np.where(ok, pr, 0.0), ok, "+".join(used) or codes[0],
-                        info["approx_position"], info["interval"], info["version"],
-                        info["marker"], str(p), tuple(skipped))
+                        table.approx_position_m, table.interval_s, table.version,
+                        table.marker, where, tuple(skipped))

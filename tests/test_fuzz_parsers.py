@@ -2,10 +2,11 @@
 
 Each case takes a short excerpt of a real file (the header and the first few records or
 epochs: small enough that a case costs milliseconds, large enough that every kind of line is
-there; the shared data hold no RINEX 3 observation or SEM file, so the observation excerpt is
-also written as RINEX 3 and the YUMA excerpt as SEM), applies one to three mutations drawn by
-hypothesis (truncation at a byte, a bit flipped, a line deleted or duplicated, a field replaced
-by garbage: a letter, ``nan``, ``inf``, an overflow, a sign, a blank) and reads the result.
+there; the shared data hold no SEM file and their RINEX 3 observation files are CRINEX, so
+the RINEX 2 observation excerpt is also written as RINEX 3 and the YUMA excerpt as SEM),
+applies one to three mutations drawn by hypothesis (truncation at a byte, a bit flipped, a line
+deleted or duplicated, a field replaced by garbage: a letter, ``nan``, ``inf``, an overflow, a
+sign, a blank) and reads the result.
 Every case must either give a complete, valid result (every number finite, elements physical,
 no duplicate satellite or transmitter) or raise the reader's own error (a ``ValueError``
 subclass) whose message names the file and a line; any other exception fails the test, and so
@@ -337,6 +338,40 @@ def test_fuzz_rinex3_observations(cases, rinex3_obs_excerpt, mutations):
             _check_observations(obs)
     cases.note("rinex3 obs", "ok" if strict is not None else
                "error" if lenient is None else "error, lenient skipped")
+
+
+@pytest.fixture(scope="module")
+def crinex_excerpt(shared_data):
+    """TLSE...crx.gz decompressed from gzip (CRINEX 3 text): the header without TIME OF LAST
+    OBS and the first three epochs (an epoch line, a clock line and one line per satellite)."""
+    import hatanaka
+
+    lines = _lines(shared_data / "obs3" / "TLSE00FRA_R_20240011800_01H_30S_MO.crx.gz")
+    end = _header_end(lines)
+    decoded = hatanaka.crx2rnx(b"\n".join(lines)).split(b"\n")
+    counts = [int(s[32:35]) for s in decoded if s[:1] == b">"][:3]  # satellites per epoch
+    k = end + 1 + sum(2 + n for n in counts)  # CRINEX: epoch line, clock line, satellites
+    head = [s for s in lines[:end + 1] if b"TIME OF LAST OBS" not in s]
+    return b"\n".join(head + lines[end + 1:k]) + b"\n"
+
+
+@fuzz()
+@given(mutations=MUTATIONS)
+def test_fuzz_crinex_observations(cases, crinex_excerpt, mutations):
+    """A mutated CRINEX file: the Hatanaka decoder stops (the error names the CRINEX line), or
+    the decoded text is read strictly (an error names the line of the decompressed text), or
+    a whole table comes back (a garbled digit of a compressed difference decodes to numbers)."""
+    assert rinex_obs.read_observation_table(cases.write(crinex_excerpt, ".crx")).t_gps_s.size == 3
+    path = cases.write(mutate(crinex_excerpt, mutations), ".crx")
+    table = expect_parse_error(rinex_obs.ObservationFileError, path,
+                               lambda: rinex_obs.read_observation_table(path))
+    if table is not None:
+        assert table.t_gps_s.size > 0 and np.all(np.diff(table.t_gps_s) > 0)
+        assert len(set(table.sv)) == table.sv.size
+        for a in table.values.values():
+            assert a.shape == (table.t_gps_s.size, table.sv.size)
+            assert not np.any(np.isinf(a))
+    cases.note("crinex obs", "ok" if table is not None else "error")
 
 
 def _check_almanac(alm):
