@@ -3,7 +3,9 @@
 An almanac holds one reduced Keplerian record per satellite (IS-GPS-200 20.3.3.5.1.2, Table
 20-VI): e, t_oa, i (SEM: delta_i from i_0 = 0.30 semicircles), Omega-dot, sqrt(A), Omega_0
 (the longitude of the ascending node at the weekly epoch), omega, M_0, a_f0, a_f1 and a health
-word. Propagation is the ephemeris algorithm with the harmonic terms, delta_n and IDOT zero
+word. The readers refuse a record whose orbit is not one of its constellation's
+(``geometry.orbit_limits``: semi-major axis, eccentricity, inclination) with the file and
+line. Propagation is the ephemeris algorithm with the harmonic terms, delta_n and IDOT zero
 (IS-GPS-200 20.3.3.5.2.3), through ``geometry.kepler.orbit_ecef``; the almanac clock is
 a_f0 + a_f1 t_k.
 
@@ -31,6 +33,7 @@ from oaraim.geometry.kepler import (
     OrbitElements,
     orbit_ecef,
 )
+from oaraim.geometry.orbit_limits import implausible_orbit
 
 
 class AlmanacFileError(ValueError):
@@ -132,9 +135,10 @@ _FIELD_RULES = {"e": (lambda v: 0.0 <= v < 1.0, "in [0, 1) (an elliptical orbit)
                 "toa": (lambda v: 0 <= v < 604800, "in [0, 604800) s of the week")}
 
 
-def _check_rows(p, rows, lines_of):
-    """AlmanacFileError (file, line) for a non-finite or unphysical value or a PRN given
-    twice. ``lines_of(i, key)``: the line of field ``key`` of record ``i``."""
+def _check_rows(p, rows, lines_of, system):
+    """AlmanacFileError (file, line) for a non-finite or unphysical value, an orbit that is
+    not one of ``system``'s ('G', 'E': ``geometry.orbit_limits``) or a PRN given twice.
+    ``lines_of(i, key)``: the line of field ``key`` of record ``i``."""
     seen = {}
     for i, r in enumerate(rows):
         for key, v in r.items():
@@ -145,6 +149,10 @@ def _check_rows(p, rows, lines_of):
             if rule is not None and not rule[0](v):
                 raise AlmanacFileError(f"{p}: line {lines_of(i, key)}: {key} = {v!r} must be "
                                        f"{rule[1]}")
+        bad = implausible_orbit(system, r["sqrt_a"], r["e"], r["i"])
+        if bad is not None:
+            raise AlmanacFileError(f"{p}: line {lines_of(i, bad[0])}: satellite {int(r['prn'])}: "
+                                   f"{bad[1]}; fix that record or use another almanac")
         prn = int(r["prn"])
         if prn in seen:
             raise AlmanacFileError(f"{p}: line {lines_of(i, 'prn')}: satellite {prn} appears "
@@ -243,7 +251,7 @@ def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
         raise AlmanacFileError(f"{p}: line {max(len(lines), 1)}: no almanac blocks ('******** "
                                "Week ... almanac for PRN-nn ********') up to the end of the "
                                "file; not a YUMA almanac")
-    _check_rows(p, rows, lambda i, key: row_lines[i].get(key, "?"))
+    _check_rows(p, rows, lambda i, key: row_lines[i].get(key, "?"), system)
     return Almanac(_records(rows, system, week_reference_t_gps_s),
                    GPS if system == "G" else GALILEO, p.name)
 
@@ -256,6 +264,8 @@ def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
     p = Path(path).expanduser()
     if not p.is_file():
         raise AlmanacFileError(f"almanac file {str(path)!r} not found")
+    if system not in ("G", "E"):
+        raise ValueError(f"system must be 'G' or 'E', got {system!r}")
     lines = p.read_text(encoding="ascii", errors="replace").splitlines()
     tokens = []  # (line number, [numbers]) of non-blank lines
     for k, line in enumerate(lines, start=1):
@@ -305,6 +315,6 @@ def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
     sem_line = {"prn": 0, "e": 3, "i": 3, "omegadot": 3, "sqrt_a": 4, "omega0": 4, "omega": 4,
                 "m0": 5, "af0": 5, "af1": 5, "health": 6}
     _check_rows(p, rows, lambda i, key: starts[i][sem_line[key]] if key in sem_line
-                else tokens[1][0])
+                else tokens[1][0], system)
     return Almanac(_records(rows, system, week_reference_t_gps_s),
                    GPS if system == "G" else GALILEO, p.name)

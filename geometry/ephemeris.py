@@ -20,11 +20,12 @@ returned so a caller can tighten it. A satellite is used at t only if
   file holds until the next healthy record takes over).
 
 GPS records are healthy when the health word is 0; Galileo records when the signal health and
-data-validity bits are all 0 (RINEX 3.04 Table A8). Records with implausible orbits
-(sqrt(A) outside [5000, 5700] m^1/2, e outside [0, 0.3]) are dropped and counted; a record
-that is no orbit at all (e outside [0, 1), sqrt(A) <= 0, a blank orbital element, a number
-that is not finite), a record given twice, or a second GPS record of a satellite at the same
-t_oc (Galileo: and the same data source) is an error naming the file and line.
+data-validity bits are all 0 (RINEX 3.04 Table A8). A record that is no orbit at all (e
+outside [0, 1), sqrt(A) <= 0, a blank orbital element, a number that is not finite), a GPS or
+Galileo record whose orbit is not one its constellation flies (semi-major axis, eccentricity,
+inclination: ``geometry.orbit_limits``; such records used to be dropped, counted only in an
+attribute), a record given twice, or a second GPS record of a satellite at the same t_oc
+(Galileo: and the same data source) is an error naming the file and line.
 """
 
 import collections
@@ -53,6 +54,7 @@ from oaraim.geometry.kepler import (
     orbit_ecef,
     relativistic_clock_s,
 )
+from oaraim.geometry.orbit_limits import ORBIT_LIMITS, implausible_orbit
 
 #: constellation codes of ``geometry.sky`` (DESIGN.md: GPS 0, Galileo 1)
 GPS, GALILEO = 0, 1
@@ -62,10 +64,9 @@ SYSTEM_NAMES = {GPS: "GPS", GALILEO: "Galileo"}
 #: default validity window |t - t_oe| for choosing a record (see the module docstring)
 DEFAULT_MAX_AGE_S = 4 * 3600.0
 
-#: plausibility of a record's orbit: GPS sqrt(A) ~ 5153.7, Galileo ~ 5440.6 m^1/2; the Galileo
-#: satellites E14/E18 in their eccentric orbits have e ~ 0.16
-SQRT_A_RANGE = (5000.0, 5700.0)
-E_MAX = 0.3
+#: the largest eccentricity of a record that loads (``geometry.orbit_limits``: GPS 0.05,
+#: Galileo 0.2, for E14/E18 at ~0.16)
+E_MAX = max(lim.e_max for lim in ORBIT_LIMITS.values())
 
 #: RINEX 3 systems of navigation records (lines per record: ``rinex_nav3.record_lines``)
 _RINEX3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
@@ -262,6 +263,14 @@ def _check_navigation_text(path: Path, text: str) -> dict:
                 raise NavigationFileError(
                     f"{path}: line {k + 3}, columns {col + 1}-{col + 19}: sqrt(A) {sqrt_a!r} is "
                     "not positive: not an orbit (re-download the file or fix that record)")
+            bad = implausible_orbit(sysch, sqrt_a, e, orbit[3][0])  # i0: ORBIT 4, field 1
+            if bad is not None:
+                row, col = {"sqrt_a": (k + 3, col + 38), "e": (k + 3, col),
+                            "i": (k + 5, data_start)}[bad[0]]
+                sv = line[:3] if rinex3 else f"G{int(line[:2]):02d}"
+                raise NavigationFileError(
+                    f"{path}: line {row}, columns {col + 1}-{col + 19}: {sv}: {bad[1]} "
+                    "(re-download the file or fix that record)")
         # a record is its values, not its layout: optional fields written or left blank, lines
         # cut after their last field (merged files mix contributors' layouts)
         text = (line[:3], date, rinex_nav3.record_meaning(sysch, clock + sum(orbit, [])))
@@ -425,16 +434,13 @@ class Ephemeris:
 
     Use ``geometry.load_navigation(path)``. Attributes: ``prns`` (S,) names, ``constellation``
     (S,) codes (GPS 0, Galileo 1), ``prn_number`` (S,) ints, ``sat_healthy`` (S,) whole-file
-    health, ``n_records`` (S,), ``rejected_records`` (implausible orbits dropped), ``path``.
+    health, ``n_records`` (S,), ``path``.
     """
 
     def __init__(self, table, path, max_age_s=DEFAULT_MAX_AGE_S):
         self.path = str(path)
         self.max_age_s = float(max_age_s)
-        plausible = ((table["sqrtA"] >= SQRT_A_RANGE[0]) & (table["sqrtA"] <= SQRT_A_RANGE[1])
-                     & (table["Eccentricity"] >= 0) & (table["Eccentricity"] <= E_MAX))
-        self.rejected_records = int(np.sum(~plausible))
-        t = {k: val[plausible] for k, val in table.items()}
+        t = table  # every record is an orbit of its constellation (checked with its line)
         prns = np.array(sorted(set(t["sv"])))
         self.prns = prns
         self.constellation = np.array([SYSTEM_CODES[p[0]] for p in prns], np.int32)

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair
+
 FORMAT_NAME = "oaraim-recording"
 FORMAT_VERSION = 1
 
@@ -343,14 +345,15 @@ def check_table(name: str, df: Any, where: Where) -> pd.DataFrame:
             r = _first(dup)
             raise where.err(f"tx_id {df['tx_id'].iloc[r]!r} appears twice",
                             "Give each transmitter one row", column="tx_id", row=r)
-        same = ["x_m", "y_m", "z_m", "group"]
-        dup = df.duplicated(same).to_numpy()
-        if dup.any():
-            r = _first(dup)
-            first = _first((df[same] == df[same].iloc[r]).all(axis=1).to_numpy())
-            raise where.err(f"transmitter {df['tx_id'].iloc[r]!r} has the position and clock "
-                            f"group of {df['tx_id'].iloc[first]!r} (row {first}): the same "
-                            "transmitter twice would count as two independent ranges",
+        near = first_near_pair(df[["x_m", "y_m", "z_m"]].to_numpy(float),
+                               df["group"].to_numpy())
+        if near is not None:
+            first, r, d = near
+            at = "the position" if d < 1e-6 else f"a position {d:.3g} m from the position"
+            raise where.err(f"transmitter {df['tx_id'].iloc[r]!r} has {at} and clock "
+                            f"group of {df['tx_id'].iloc[first]!r} (row {first}): closer than "
+                            f"{MIN_SEPARATION_M:g} m, the same transmitter twice would count "
+                            "as two independent ranges",
                             "Keep one row per transmitter (co-located antennas of one clock "
                             "group are one transmitter)", column="tx_id", row=r)
     return df

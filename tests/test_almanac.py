@@ -259,3 +259,64 @@ def test_yuma_integers_out_of_range_name_the_line(shared_data, tmp_path, field, 
     p.write_text("\n".join(first) + "\n")
     with pytest.raises(geometry.AlmanacFileError, match=r"edit\.alm: " + message):
         geometry.read_yuma(p)
+
+
+@pytest.mark.parametrize("field, bad, message", [
+    ("SQRT(A)  (m 1/2):", "1000.000000",
+     r"line 8: satellite 1: sqrt\(A\) = 1000\.0 m\^1/2 is a semi-major axis of 1,000 km, not a "
+     r"GPS orbit \(25,560 \.\. 27,560 km"),
+    ("Eccentricity:", "0.99", r"line 4: satellite 1: eccentricity 0\.99 is not a GPS orbit's "
+                             r"\(0 \.\. 0\.05\)"),
+    ("Orbital Inclination(rad):", "50.0", r"line 6: satellite 1: inclination 50\.0 rad "
+                                         r"\(2,864\.8 deg\) is not a GPS orbit's \(40 \.\. 70 "
+                                         r"deg\)"),
+])
+def test_yuma_implausible_orbits_are_refused_with_the_line(shared_data, tmp_path, field, bad,
+                                                           message):
+    """A well-formed record that is no GPS orbit loaded silently: SQRT(A) = 1000 (an orbit
+    1,000 km from the Earth's centre) took the satellite out of the sky without a word (the
+    HPL of seed 001's MDSCC day at epoch 1 went from 11.90 to 12.62 m), e = 0.99 and an
+    inclination of 50 rad were accepted. Each is now an error naming the file and the line of
+    the element (the first block of the real January 2020 almanac edited)."""
+    text = (shared_data / "almanac" / "almyuma_01jan2020.txt").read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith(field))
+    assert _line_of(text, line) == int(message.split()[1].rstrip(":"))
+    p = tmp_path / "alm.txt"
+    p.write_text(text.replace(line, f"{field:<28s}{bad}", 1))
+    with pytest.raises(geometry.AlmanacFileError, match=r"alm\.txt: " + message):
+        geometry.read_yuma(p)
+
+
+def test_orbit_limits_are_the_constellations_and_hold_every_real_orbit(shared_data, tmp_path):
+    """A Galileo almanac with a GPS-sized orbit (26,560 km) is refused (the limits are per
+    constellation), and so is a SEM record inside the Earth; every satellite of the real
+    almanacs passes (GPS 2020 and MAAST's DO-229 file, Galileo ED-259)."""
+    from oaraim.geometry.orbit_limits import ORBIT_LIMITS, implausible_orbit
+
+    gal = (shared_data / "almanac" / "alm_gal_ed259.txt").read_text()
+    line = next(ln for ln in gal.splitlines() if ln.startswith("SQRT(A)"))
+    p = tmp_path / "gal.txt"
+    p.write_text(gal.replace(line, "SQRT(A)  (m 1/2):           5153.6", 1))
+    with pytest.raises(geometry.AlmanacFileError,
+                       match=rf"gal\.txt: line {_line_of(gal, line)}: satellite \d+: sqrt\(A\) = "
+                       r"5153\.6 m\^1/2 is a semi-major axis of 26,560 km, not a Galileo orbit"):
+        geometry.read_yuma(p, system="E")
+    p = tmp_path / "x.al3"
+    p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 0.0 0.0056 0\n 1000.0 0 0\n 0 0 0\n0\n9\n")
+    with pytest.raises(geometry.AlmanacFileError, match=r"x\.al3: line 8: satellite 1: sqrt\(A\) "
+                       r"= 1000\.0"):
+        geometry.read_sem(p)
+    p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 0.0 0.0056 0\n 5153.6 0 0\n 0 0 0\n0\n9\n")
+    assert geometry.read_sem(p).prns.tolist() == ["G01"]  # the same record, a GPS orbit
+    for name, system in (("almyuma_01jan2020.txt", "G"), ("almmops.txt", "G"),
+                         ("alm_gal_ed259.txt", "E")):
+        r = geometry.read_yuma(shared_data / "almanac" / name, system=system).records
+        for k in range(r.prn.size):
+            assert implausible_orbit(system, r.sqrt_a[k], r.e[k], r.i_rad[k]) is None
+    # the limits by hand: GPS a = 26,560 km +- 1,000 km, so sqrt(A) 5055.7 .. 5249.8
+    lo, hi = ORBIT_LIMITS["G"].a_m
+    assert implausible_orbit("G", np.sqrt(lo) * (1 + 1e-9), 0.0, 0.96) is None
+    assert implausible_orbit("G", np.sqrt(lo) * (1 - 1e-9), 0.0, 0.96)[0] == "sqrt_a"
+    assert implausible_orbit("G", np.sqrt(hi) * (1 + 1e-9), 0.0, 0.96)[0] == "sqrt_a"
+    assert implausible_orbit("E", 5289.3, 0.16, np.radians(49.8)) is None  # E14 / E18
+    assert implausible_orbit("G", 5153.6, 0.16, 0.96)[0] == "e"  # but not for GPS

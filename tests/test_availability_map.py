@@ -375,6 +375,25 @@ def test_tower_csv_with_a_byte_order_mark_and_shared_masts(tmp_path):
     assert lat.size == 3 and names == ["A", "B"] and car.tolist() == [0, 1, 1]
 
 
+@pytest.mark.parametrize("extra, message", [
+    ("50.010000001,0.0,40,A\n", r"line 4: the tower of line 2 again \(0\.000111 m from it\): "
+                               r"two rows of carrier 'A' closer than 1 m"),
+    ("50.01,0.0,40.5,A\n", r"line 4: the tower of line 2 again \(0\.5 m from it\)"),
+    ("50.01,360.0,40,A\n", r"line 4: the tower of line 2 again: two rows of carrier 'A'"),
+])
+def test_near_duplicate_towers_are_refused(tmp_path, extra, message):
+    """Two rows of one carrier 1e-9 deg apart (0.1 mm) passed the exact duplicate check and
+    counted as two independent ranges. Rows of one carrier closer than 1 m
+    (``geometry.transmitters.MIN_SEPARATION_M``) are one transmitter given twice; 1.5 m apart,
+    or the same mast for another carrier, are two."""
+    f = tmp_path / "towers.csv"
+    f.write_text(GOOD_TOWERS + extra)
+    with pytest.raises(am.TowerFileError, match=r"towers\.csv, " + message):
+        am.read_towers(f)
+    f.write_text(GOOD_TOWERS + "50.01,0.0,41.5,A\n" + extra.replace(",A", ",C"))
+    assert am.read_towers(f)[0].size == 4
+
+
 def test_sop_inputs_are_the_seed004_model():
     vi, va = (np.asarray(x) for x in sop_variances(np.array([2.0])))
     assert vi[0] == va[0] == 4.0  # sigma_URE^S = sigma_URA^S, no user term (DESIGN.md)

@@ -254,3 +254,45 @@ def test_sp3_errors(tmp_path):
     p = _write(tmp_path, "y.sp3", "#cP2010  7  1  0  0  0.00000000      96 ORBIT\n*  2010  7 x\n")
     with pytest.raises(geometry.SP3Error, match="line 2: cannot read the epoch"):
         geometry.read_sp3(p)
+
+
+@pytest.mark.parametrize("line, field, value, message", [
+    (2, 3, "0.100000000000D+04", r"line 11, columns 61-79: G01: sqrt\(A\) = 1000\.0 m\^1/2 is a "
+                                 r"semi-major axis of 1,000 km, not a GPS orbit"),
+    (2, 1, "0.990000000000D+00", r"line 11, columns 23-41: G01: eccentricity 0\.99 is not a GPS "
+                                 r"orbit's \(0 \.\. 0\.05\)"),
+    (4, 0, "0.500000000000D+02", r"line 13, columns 4-22: G01: inclination 50\.0 rad "
+                                 r"\(2,864\.8 deg\) is not a GPS orbit's"),
+    (2, 3, "0.544060000000D+04", r"line 11, columns 61-79: G01: .* 29,600 km, not a GPS orbit"),
+])
+def test_implausible_orbits_name_the_line(shared_data, tmp_path, line, field, value, message):
+    """A well-formed record that is no orbit of its constellation (sqrt(A) = 1000: inside the
+    Earth; e = 0.99; i = 50 rad; a Galileo-sized orbit in a GPS record) was dropped and counted
+    only in an attribute nobody read (inclination and the constellation were not looked at):
+    now a NavigationFileError naming the file, the line and the columns."""
+    lines = (shared_data / "nav" / "brdc1820.10n").read_text().splitlines()
+    records = lines[8:8 + 24]
+    records[line] = _field(records[line], field, value)
+    p = _write(tmp_path, "edit.10n", "\n".join(lines[:8] + records) + "\n")
+    with pytest.raises(geometry.NavigationFileError, match=r"edit\.10n: " + message):
+        geometry.load_navigation(p)
+
+
+def test_rinex3_galileo_orbit_with_a_gps_semi_major_axis_is_refused(shared_data, tmp_path):
+    """The limits are per constellation: the first Galileo record of a RINEX 3 file with a
+    GPS-sized sqrt(A) (5153.6: 26,560 km) is refused naming its line and columns, while the
+    file as it is loads."""
+    with gzip.open(shared_data / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz", "rt") as f:
+        lines = f.read().splitlines()
+    end = next(k for k, s in enumerate(lines) if "END OF HEADER" in s)
+    e01 = next(k for k in range(end + 1, len(lines)) if lines[k].startswith("E"))
+    excerpt = lines[:end + 1] + lines[end + 1:end + 1 + 8] + lines[e01:e01 + 8]
+    ok = _write(tmp_path, "ok.rnx", "\n".join(excerpt) + "\n")
+    assert geometry.load_navigation(ok).prns.tolist() == ["E01", "G01"]
+    excerpt[end + 1 + 8 + 2] = _field(excerpt[end + 1 + 8 + 2], 3, "5.153600000000E+03", 4)
+    p = _write(tmp_path, "gal.rnx", "\n".join(excerpt) + "\n")
+    row = end + 1 + 8 + 3
+    with pytest.raises(geometry.NavigationFileError,
+                       match=rf"gal\.rnx: line {row}, columns 62-80: E01: sqrt\(A\) = 5153\.6 "
+                       r"m\^1/2 is a semi-major axis of 26,560 km, not a Galileo orbit"):
+        geometry.load_navigation(p)

@@ -424,3 +424,29 @@ def test_csv_floats_round_trip_bit_exact(tmp_path):
     r = R.validate_recording(_hand_recording(rows))
     back = R.load_recording(R.write_recording(tmp_path / "f", r, format="csv"))
     pd.testing.assert_frame_equal(back.pseudoranges, r.pseudoranges, check_exact=True)
+
+
+@pytest.mark.parametrize("dx_m, message", [
+    (1e-4, r"transmitter 'T9' has a position 0\.0001 m from the position and clock group of "
+           r"'T1' \(row 0\): closer than 1 m"),
+    (0.9, r"transmitter 'T9' has a position 0\.9 m from the position and clock group of 'T1'"),
+    (2.0, None),
+])
+def test_near_duplicate_transmitters_are_refused(rec, tmp_path, dx_m, message):
+    """A transmitter listed again 0.1 mm from itself under a new id passed the exact duplicate
+    check and counted as a second independent range. Transmitters of one clock group closer
+    than 1 m (``geometry.transmitters.MIN_SEPARATION_M``) are one given twice; 2 m apart, two."""
+    tables = {k: v.copy() for k, v in _tables(rec).items()}
+    tx = tables["transmitters"]
+    again = tx.iloc[[0]].copy()
+    again["tx_id"] = "T9"
+    again["x_m"] = again["x_m"] + dx_m
+    tables["transmitters"] = pd.concat([tx, again], ignore_index=True)
+    folder = tmp_path / "d"
+    _write_raw(folder, rec.meta, tables)
+    if message is None:
+        assert "T9" in R.load_recording(folder).transmitters["tx_id"].tolist()
+        return
+    with pytest.raises(RecordingError, match=r"transmitters\.csv, column 'tx_id', row 3 "
+                       r"\(file line 5\): " + message):
+        R.load_recording(folder)

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from oaraim.geometry.frames import geodetic_to_ecef
+from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair
 from oaraim.studies.base import in_range, keyword_or_file, positive
 
 # ------------------------------------------------------------------------------------ grids
@@ -46,9 +48,22 @@ def parse_grid(lo, hi):
 
 def parse_orbits(default_file):
     """'auto' (``default_file`` from the data registry, fetched if missing), 'nominal' (the
-    built-in constellation), 'none', or a YUMA / SEM almanac or RINEX navigation file."""
-    return keyword_or_file(("auto", "nominal", "none"),
-                           f"almanac or navigation file ('auto': {default_file})")
+    built-in constellation), 'none', or a YUMA / SEM almanac or RINEX navigation file, read
+    and checked now (a malformed file or an implausible orbit names its file and line before
+    anything is written)."""
+    keywords = ("auto", "nominal", "none")
+    path_or_keyword = keyword_or_file(keywords,
+                                      f"almanac or navigation file ('auto': {default_file})")
+
+    def parse(name, v):
+        s = path_or_keyword(name, v)
+        if s not in keywords:
+            from oaraim.geometry.sky import resolve_source
+
+            resolve_source(s, (name,) if name in ("gps", "galileo") else ("gps", "galileo"))
+        return s
+
+    return parse
 
 
 def parse_limit(name, v):
@@ -86,9 +101,9 @@ def read_towers(path):
     """Towers of a CSV (lat_deg, lon_deg, height_m, carrier): arrays and the carrier names
     (sorted; carrier k becomes SOP constellation 2 + k). UTF-8, a byte-order mark accepted
     (Excel's "CSV UTF-8"); bytes that are not UTF-8, broken quoting, a short or long row, a
-    non-number, a value out of range, a row given twice (same position, height and carrier) or
-    a last line without its line break (a file cut short) is a ``TowerFileError`` (a
-    ValueError) naming the file and line."""
+    non-number, a value out of range, a row given twice (two rows of one carrier closer than
+    ``geometry.transmitters.MIN_SEPARATION_M``, 1 m) or a last line without its line break (a
+    file cut short) is a ``TowerFileError`` (a ValueError) naming the file and line."""
     need = ("lat_deg", "lon_deg", "height_m", "carrier")
     raw = Path(path).read_bytes()
     try:
@@ -117,8 +132,7 @@ def read_towers(path):
         raise TowerFileError(f"tower file {path}, line {text.count(chr(10)) + 1}: the last line "
                              "does not end with a line break: the file is truncated")
     col = {c: header.index(c) for c in need}
-    lat, lon, h, car = [], [], [], []
-    seen = {}
+    lat, lon, h, car, line_of = [], [], [], [], []
     for i, row in body:
         if not any(x.strip() for x in row):
             continue  # a blank line
@@ -136,16 +150,21 @@ def read_towers(path):
                                  f"in [-180, 360], height_m in [-500, 9000] m; got {r}")
         if not r["carrier"]:
             raise TowerFileError(f"tower file {path}, line {i}: empty carrier")
-        key = (la, lo % 360.0, hh, r["carrier"])
-        if key in seen:
-            raise TowerFileError(f"tower file {path}, line {i}: the tower of line {seen[key]} "
-                                 "again (same position, height and carrier); one row per "
-                                 "transmitter (carriers sharing a mast: one row each)")
-        seen[key] = i
         lat.append(la)
         lon.append(lo)
         h.append(hh)
         car.append(r["carrier"])
+        line_of.append(i)
+    xyz = np.asarray(geodetic_to_ecef(np.radians(lat), np.radians(lon), np.asarray(h, float)))
+    near = first_near_pair(xyz, car)
+    if near is not None:
+        a, b, d = near
+        again = "again" if d < 1e-6 else f"again ({d:.3g} m from it)"  # 1e-6: rounding
+        raise TowerFileError(f"tower file {path}, line {line_of[b]}: the tower of line "
+                             f"{line_of[a]} {again}: two rows of carrier {car[b]!r} closer "
+                             f"than {MIN_SEPARATION_M:g} m are one transmitter given twice (it "
+                             "would count as two independent ranges); one row per transmitter "
+                             "(carriers sharing a mast: one row each)")
     names = sorted(set(car))
     return (np.array(lat), np.array(lon), np.array(h),
             np.array([names.index(c) for c in car]), names)
