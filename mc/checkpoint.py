@@ -166,6 +166,18 @@ class Checkpoint:
         self.computed += 1
         return value
 
+    def remove_if_nothing_finished(self):
+        """After a failed run: remove the folder (``identity.json``) if it holds no finished
+        unit, so a run that failed on its first unit leaves nothing half-made."""
+        try:
+            remove_partial_writes(self.folder)
+            if any(f.suffix == ".npz" for f in self.folder.iterdir()):
+                return
+            (self.folder / IDENTITY).unlink(missing_ok=True)
+            self.folder.rmdir()
+        except OSError:
+            pass  # the original error is the one to report
+
     def provenance(self):
         """What provenance.json records of the checkpoints: resumed, units computed, reused."""
         return {"resumed": self.resumed, "units_computed": self.computed,

@@ -18,6 +18,18 @@ import jax.numpy as jnp
 import numpy as np
 
 MAX_REALIZATIONS = 2**32  # fold_in takes a uint32 index
+#: the seeds ``jax.random.key`` takes (a signed 64-bit integer; each gives its own key)
+SEED_RANGE = (-(2**63), 2**63 - 1)
+
+
+def check_seed(seed, option="--seed"):
+    """``seed`` as an ``int`` if it lies in ``SEED_RANGE`` (what the key derivation takes),
+    else a one-line ``ValueError`` naming ``option``, the value and the range."""
+    ok = isinstance(seed, int | np.integer) and not isinstance(seed, bool)
+    if not ok or not SEED_RANGE[0] <= int(seed) <= SEED_RANGE[1]:
+        raise ValueError(f"{option} must be an integer in [-2^63, 2^63 - 1] (the 64-bit seed of "
+                         f"the random keys), got {seed!r}; choose a seed in that range")
+    return int(seed)
 
 
 def cell_key(seed: int, cell: int):

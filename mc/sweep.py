@@ -54,7 +54,7 @@ import numpy as np
 from oaraim.config import default_threads
 from oaraim.mc.grid import Axis, canonical, cell_key_id
 from oaraim.mc.grid import cells as grid_cells
-from oaraim.mc.keys import MAX_REALIZATIONS
+from oaraim.mc.keys import MAX_REALIZATIONS, check_seed
 from oaraim.mc.reduce import BLOCK, REDUCERS, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import DEFAULT_CHUNK
 from oaraim.mc.sweep_backends import (
@@ -264,6 +264,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     if chunk_size is None:
         chunk_size = DEFAULT_CHUNK
     _check_args(axes, realizations, reducers, key_axes, workers, scheduler)
+    seed = check_seed(seed, "seed")
     if threads is None:
         threads = default_threads()
     if not isinstance(threads, int | np.integer) or threads < 1:

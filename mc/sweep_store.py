@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from oaraim.mc.store import jsonable
+from oaraim.mc.store import jsonable, writing
 
 FORMAT_VERSION = 1
 MANIFEST = "sweep.json"
@@ -23,13 +23,17 @@ CHUNK_RE = re.compile(r"^([0-9a-f]{16})_(\d{10})_(\d{6})\.npz$")
 
 def write_atomic(path: Path, data: bytes):
     """Write ``data`` to ``path`` so that a reader (or a resume after SIGKILL) sees either the
-    whole new file or none: temporary file in the same folder, fsync, rename."""
+    whole new file or none: temporary file in the same folder, fsync, rename. An ``OSError``
+    names ``path``."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with writing(path), open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)  # a failed write (a full disk) leaves no temporary file
 
 
 def remove_partial_writes(folder: Path):
@@ -103,6 +107,22 @@ def differences(old, new, prefix=""):
     return []
 
 
+
+
+def remove_if_nothing_finished(out_dir: Path):
+    """After a failed run: remove ``chunks/`` and the manifest if no chunk file was finished
+    (a run that failed on its first chunk, e.g. on a malformed input file, leaves no
+    half-made sweep folder); finished chunks stay, with their manifest, for ``--resume``."""
+    chunk_dir = out_dir / CHUNK_DIR
+    try:
+        if chunk_dir.is_dir():
+            remove_partial_writes(chunk_dir)
+            if any(CHUNK_RE.match(f.name) for f in chunk_dir.iterdir()):
+                return
+            chunk_dir.rmdir()
+        (out_dir / MANIFEST).unlink(missing_ok=True)
+    except OSError:
+        pass  # the original error is the one to report
 
 
 def prepare_out_dir(out_dir: Path, manifest: dict, resume: bool):

@@ -17,6 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from oaraim.mc.keys import check_seed
+
 #: relative step of the sensitivity differences (+-5 %)
 SENSITIVITY_STEP = 0.05
 #: relative tolerance of the fitted parameters (of their range)
@@ -72,8 +74,9 @@ def calibrate(study, *, realizations=None, seed=0, sets=None,
     line per evaluation (progress).
 
     Raises:
-      ValueError: the study declares no calibration, a set value is invalid, or a target does
-        not match exactly one summary row (the message names it).
+      ValueError: the study declares no calibration, a set value is invalid, the seed is
+        outside ``mc.keys.SEED_RANGE``, or a target does not match exactly one summary row
+        (the message names it).
     """
     cal = study.calibration
     if cal is None:
@@ -82,6 +85,7 @@ def calibrate(study, *, realizations=None, seed=0, sets=None,
         names = ", ".join(k for k, v in STUDIES.items() if v.calibration is not None)
         raise ValueError(f"{study.name} declares no calibration (no open parameter fitted to "
                          f"its published numbers); studies with one: {names}")
+    seed = check_seed(seed)
     n = int(realizations or cal.realizations)
     fixed = {**cal.sets, **(sets or {})}
     base_params = study.validate(fixed)

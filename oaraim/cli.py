@@ -31,6 +31,11 @@ def _fail(msg: str):
     raise typer.Exit(2)
 
 
+def _warn(msg: str):
+    """A one-line notice on stderr (a run that took over a dead run's lock)."""
+    err.print(f"[bold yellow]warning:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+
+
 TRUST_HELP = ("use local data files (OARAIM_DATA folder, ../shared/data) even where their "
               "sha256 differs from the registry's (also OARAIM_TRUST_DATA=1)")
 
@@ -100,7 +105,8 @@ def run(
                                                  out=out_dir, sets=set_, quick=quick,
                                                  show_progress=progress, resume=resume,
                                                  execution=Execution(workers=workers,
-                                                                     scheduler=scheduler))
+                                                                     scheduler=scheduler),
+                                                 notice=_warn)
     except (ValueError, OSError) as e:  # bad input, unusable --out, a full disk: one line
         _fail(str(e))
     _print_rows(summary)
@@ -208,7 +214,13 @@ def reproduce(
               "writes only under --out)")
     if jobs < 1:
         _fail(f"--jobs must be >= 1, got {jobs}")
+    from oaraim.mc.keys import check_seed
     from oaraim.mc.store import OutputError, check_output_folder
+
+    try:  # once, not one failure per study
+        check_seed(seed)
+    except ValueError as e:
+        _fail(str(e))
 
     try:  # once, before any study: not one failure per study after its computation
         check_output_folder(out_dir)

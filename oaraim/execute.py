@@ -1,13 +1,21 @@
 """Run one study end to end: validate, compute, store, plot (the app layer above studies/)."""
 
 import functools
+import sys
 import time
-import warnings
 from pathlib import Path
 
 from oaraim.mc.checkpoint import Checkpoint, identity
+from oaraim.mc.keys import check_seed
 from oaraim.mc.progress import ProgressBar
-from oaraim.mc.store import OutputLock, provenance, write_results
+from oaraim.mc.store import (
+    OutputError,
+    OutputLock,
+    os_error_line,
+    provenance,
+    write_results,
+    writing,
+)
 from oaraim.mc.sweep import Execution
 from oaraim.registry import STUDIES, get_study
 from oaraim.studies import base
@@ -77,14 +85,25 @@ def _check_sweep_flags(study, resume, execution):
         raise ValueError(f"--workers must be >= 1, got {workers}")
 
 
+def _stderr_line(text):
+    print(f"warning: {text}", file=sys.stderr, flush=True)
+
+
 def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=False,
-              show_progress=True, resume=False, execution=None):
+              show_progress=True, resume=False, execution=None, notice=None):
     """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder, figure
     paths, wall time in s). Sweep studies and ``ResumableStudy`` ones take ``resume`` (reuse
     the finished chunks or checkpointed units in ``out/name/``); sweep studies also take
     ``execution`` (an ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler``
-    address)."""
+    address). ``notice(text)`` says, in one line, what the run did on its own (taking over
+    the lock of a run that died); default: printed to stderr as ``warning: ...``.
+
+    Every user error is a ``ValueError`` with one line (the CLI exits 2): bad parameters, a
+    seed outside ``mc.keys.SEED_RANGE``, an unusable ``--out`` and any ``OSError`` while the
+    run reads or writes (a full disk: the path, and what to do, ``mc.store.os_error_line``).
+    """
     study = get_study(name)
+    seed = check_seed(seed)
     execution = Execution() if execution is None else execution
     _check_sweep_flags(study, resume, execution)
     overrides = parse_sets(sets)
@@ -103,16 +122,22 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
         raise ValueError(f"--realizations must be >= 1, got {realizations}")
     limit = study.realization_limit()
     if fixed is None and limit is not None and realizations > limit:
-        raise ValueError(f"--realizations {realizations:,} is more than {study.name} holds in "
-                         f"one run (at most {limit:,}, it keeps them in memory); run several "
-                         "--seed values and combine them")
+        raise ValueError(study.too_many_realizations(realizations, limit))
     out_dir = Path(out) / study.name
-    with OutputLock(out_dir) as lock:
-        if lock.taken_over is not None:
-            warnings.warn(f"{out_dir}: took over the lock of process {lock.taken_over}, which "
-                          "is no longer running", stacklevel=2)
-        return _run_locked(study, params, realizations, seed, out_dir, show_progress, resume,
-                           execution)
+    resumable = isinstance(study, SweepStudy | ResumableStudy)
+    try:
+        with OutputLock(out_dir) as lock:
+            if lock.taken_over is not None:
+                (notice or _stderr_line)(
+                    f"{out_dir}: took over the lock of process {lock.taken_over}, which is no "
+                    "longer running" if lock.taken_over else
+                    f"{out_dir}: took over a lock file that names no process")
+            return _run_locked(study, params, realizations, seed, out_dir, show_progress,
+                               resume, execution)
+    except (OutputError, ConnectionError, TimeoutError):
+        raise  # one line already; a Dask scheduler's network error says what it is
+    except OSError as e:  # a full disk, a folder made read-only: the path and what to do
+        raise OutputError(os_error_line(e, out_dir, resumable)) from None
 
 
 def study_outcome(name, *, seed, out, quick, show_progress):
@@ -138,8 +163,12 @@ def _run_locked(study, params, realizations, seed, out_dir, show_progress, resum
     elif isinstance(study, ResumableStudy):
         checkpoint = Checkpoint(out_dir, identity(study.name, params, seed, realizations),
                                 resume=resume)
-        with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
-            result = study.run(params, realizations, seed, bar, checkpoint=checkpoint)
+        try:
+            with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
+                result = study.run(params, realizations, seed, bar, checkpoint=checkpoint)
+        except BaseException:
+            checkpoint.remove_if_nothing_finished()  # finished units stay for --resume
+            raise
         extra["checkpoint"] = checkpoint.provenance()
     else:
         with ProgressBar(realizations, study.name, enabled=show_progress) as bar:
@@ -152,8 +181,13 @@ def _run_locked(study, params, realizations, seed, out_dir, show_progress, resum
                       realization=study.realization, seed_paper=study.seed_file,
                       **{**result.extra_provenance, **extra})
     figures = write_results(out_dir, result.dataset, summary, prov,
-                            before_summary=lambda: study.plot(out_dir))
+                            before_summary=lambda: _plot(study, out_dir))
     return summary, out_dir, figures, wall_s
+
+
+def _plot(study, out_dir):
+    with writing(out_dir):  # a figure that cannot be written names the folder
+        return study.plot(out_dir)
 
 
 def data_provenance(study, params):

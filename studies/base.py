@@ -206,7 +206,8 @@ class Study:
     #: its processes finish together)
     quick_cost_s: float = 10.0
     #: most realizations one run holds (a study that keeps its realizations in memory; sweep
-    #: studies chunk them to disk and have no bound): None = 20 x ``default_realizations``
+    #: studies chunk them to disk and are bound by the keys' 32-bit realization index only):
+    #: None = 20 x ``default_realizations``
     max_realizations: int | None = None
     params: dict = {}
     #: registry name (``oaraim.data``) of the real file that ``--set nav=auto`` uses, if any
@@ -226,6 +227,13 @@ class Study:
         """The most realizations a run accepts (None: no bound)."""
         return (self.max_realizations if self.max_realizations is not None
                 else 20 * self.default_realizations)
+
+    def too_many_realizations(self, n: int, limit: int) -> str:
+        """The one line refusing ``--realizations n`` above ``limit``: why, and what to do
+        instead (a study whose realizations are not random draws says what it does)."""
+        return (f"--realizations {n:,} is more than {self.name} holds in one run (at most "
+                f"{limit:,}, it keeps them in memory); run several --seed values and combine "
+                "them")
 
     def validate(self, overrides: dict) -> dict:
         """Defaults updated with ``overrides`` (raw strings or values), each parsed and checked."""
@@ -301,8 +309,17 @@ class SweepStudy(Study):
     axis_names: tuple = ()
 
     def realization_limit(self) -> int | None:
-        """None: a sweep has no bound on realizations."""
-        return None  # chunked to disk (``mc.sweep``): no bound
+        """2^32 per cell: chunked to disk (``mc.sweep``), bound only by the 32-bit index of a
+        realization in its key (``mc.keys.MAX_REALIZATIONS``)."""
+        from oaraim.mc.keys import MAX_REALIZATIONS
+
+        return MAX_REALIZATIONS
+
+    def too_many_realizations(self, n: int, limit: int) -> str:
+        """The one line refusing more realizations per cell than the keys index."""
+        return (f"--realizations {n:,} is more than a sweep draws per cell (at most 2^32 = "
+                f"{limit:,}: a realization's index in its random key is 32-bit); run several "
+                "--seed values (each draws other realizations) and combine them")
     key_axes: tuple = ()
     chunk_param: str = "chunk"  # the parameter giving realizations per task / chunk file
 
@@ -380,9 +397,11 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
     ``execution`` (an ``mc.sweep.Execution``: threads, Dask workers or scheduler) defaults to
     in-process; the chunk size is the study's (``chunk_size(params)``) unless ``execution``
     sets one. ``kernel_factory`` (``coords -> kernel``) defaults to the study object's own
-    kernel; ``oaraim.execute`` passes one that Dask workers look up by study name.
+    kernel; ``oaraim.execute`` passes one that Dask workers look up by study name. A run
+    that fails before any chunk is finished removes ``sweep.json`` and ``chunks/`` again.
     """
     from oaraim.mc.sweep import Execution, Storage, run_sweep
+    from oaraim.mc.sweep_store import remove_if_nothing_finished
 
     execution = Execution() if execution is None else execution
     if execution.chunk_size is None:
@@ -391,10 +410,17 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
         kernel_factory = functools.partial(study_kernel, study, params)
     storage = Storage(out_dir, sweep_fingerprint(study, params, realizations, seed),
                       resume=resume)
-    sweep = run_sweep(kernel_factory, study.axes(params), realizations, study.reducers(params),
-                      seed=seed, key_axes=study.key_axes, storage=storage, execution=execution,
-                      batch_size=study.batch_size(params), progress=progress,
-                      description=study.name)
+    try:
+        sweep = run_sweep(kernel_factory, study.axes(params), realizations,
+                          study.reducers(params), seed=seed, key_axes=study.key_axes,
+                          storage=storage, execution=execution,
+                          batch_size=study.batch_size(params), progress=progress,
+                          description=study.name)
+    except BaseException:
+        # a run that failed before finishing a chunk (a kernel's first chunk failed) leaves
+        # no sweep.json and chunks/; finished chunks stay for --resume
+        remove_if_nothing_finished(Path(out_dir))
+        raise
     return study.finish(params, sweep.dataset, realizations, seed), sweep
 
 

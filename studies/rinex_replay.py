@@ -307,6 +307,13 @@ class RinexReplay(Study):
         """The default observation and navigation files when ``obs``/``nav`` are 'auto'."""
         return data_files(params["obs"], params["nav"])
 
+    def too_many_realizations(self, n, limit):
+        """A realization is an epoch of the file (the seed draws nothing): replay parts."""
+        return (f"--realizations {n:,} is more epochs than {self.name} replays in one run (at "
+                f"most {limit:,}, it keeps them in memory); one realization is one epoch of the "
+                "observation file: split a longer file into parts (e.g. with gfzrnx or teqc) "
+                "and replay each")
+
     params = {
         "obs": Param("auto", parse_path, "RINEX 2/3 observation file ('auto': "
                      f"{DEFAULT_OBS}, fetched if missing: `oaraim data list`)"),
