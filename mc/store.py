@@ -2,6 +2,7 @@
 
 import contextlib
 import datetime as _dt
+import errno
 import importlib.metadata
 import json
 import os
@@ -253,7 +254,13 @@ class OutputLock:
                 return
             except FileExistsError:
                 pass
-            with _folder_mutex(self.out_dir):
+            except OSError as e:
+                if e.errno in _UNSUPPORTED:
+                    raise OutputError(f"--out: cannot lock {self.out_dir}: its file system makes "
+                                      f"no hard links ({e.strerror}), which the lock needs; "
+                                      "choose an --out on a local file system") from None
+                raise
+            with _folder_mutex(self.out_dir, self.path):
                 # a stale lock is replaced only here, under the folder's flock; a lock is
                 # otherwise only made by a link (never over another) and removed by its holder
                 while True:
@@ -310,6 +317,9 @@ class OutputLock:
         return False
 
 
+#: errno values of a file system that lacks an operation (hard links, flock)
+_UNSUPPORTED = tuple(getattr(errno, n) for n in ("EPERM", "ENOTSUP", "EOPNOTSUPP", "ENOSYS")
+                     if hasattr(errno, n))
 #: this host's name in a lock file (a pid is checked only on its own host)
 _HOST = socket.gethostname().split()[0] if socket.gethostname().split() else "localhost"
 #: the output folders this process holds (realpath), and the guard of that set
@@ -318,14 +328,21 @@ _HELD_GUARD = threading.Lock()
 
 
 @contextlib.contextmanager
-def _folder_mutex(d):
+def _folder_mutex(d, lock_path):
     """``flock`` on the folder ``d`` itself (released with the descriptor, also when the
-    process dies, so it is never stale)."""
+    process dies, so it is never stale); a file system without ``flock`` is one line."""
     import fcntl
 
     fd = os.open(d, os.O_RDONLY)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as e:
+            if e.errno not in (*_UNSUPPORTED, errno.ENOLCK):
+                raise
+            raise OutputError(f"--out: {d} holds a lock ({lock_path}) that may be stale, and "
+                              f"its file system has no flock ({e.strerror}) to take it over "
+                              f"safely; remove {lock_path} if no run uses it") from None
         yield
     finally:
         os.close(fd)  # releases the flock
@@ -347,8 +364,6 @@ def os_error_line(e: OSError, out_dir, resumable=False) -> str:
     """One line for an ``OSError`` of a run writing ``out_dir``: the path (the error's, else
     ``out_dir``), what went wrong and what to do (free space, permissions, another --out; a
     resumable study keeps its finished work: rerun with --resume)."""
-    import errno
-
     path = e.filename if e.filename is not None else out_dir
     what = e.strerror or str(e) or type(e).__name__
     again = (" and rerun with --resume (the finished chunks or units are kept)" if resumable

@@ -169,3 +169,36 @@ def test_a_live_lock_is_refused_and_a_dead_one_taken_over(tmp_path):
     with OutputLock(d) as lock:
         assert lock.taken_over == os.getpid()
     assert not (d / LOCK_NAME).exists() and os.listdir(d) == []
+
+
+def test_a_file_system_without_hard_links_or_flock_is_one_line(tmp_path, monkeypatch):
+    """The lock needs hard links (and flock to take over a stale lock): a file system without
+    them is one line saying so, never a lock taken without them; nothing is left behind."""
+    import errno
+    import fcntl
+
+    d = tmp_path / "out"
+    d.mkdir()
+
+    def no_link(src, dst):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    with monkeypatch.context() as m:
+        m.setattr(os, "link", no_link)
+        with pytest.raises(OutputError, match=r"its file system makes no hard links \(Operation "
+                           r"not permitted\), which the lock needs; choose an --out on a local"):
+            OutputLock(d).__enter__()
+    assert os.listdir(d) == []
+    (d / LOCK_NAME).write_text(f"{_dead_pid()}\n")
+
+    def no_flock(fd, op):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    with monkeypatch.context() as m:
+        m.setattr(fcntl, "flock", no_flock)
+        with pytest.raises(OutputError, match=r"has no flock \(No locks available\) to take it "
+                           rf"over safely; remove {d / LOCK_NAME} if no run uses it"):
+            OutputLock(d).__enter__()
+    assert os.listdir(d) == [LOCK_NAME]
+    with OutputLock(d) as lock:  # with flock: taken over
+        assert lock.taken_over
