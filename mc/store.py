@@ -148,9 +148,10 @@ def write_results(out_dir, dataset, summary, provenance_dict, before_summary=Non
     return out
 
 
-#: what a run killed mid-write leaves in its output folder (``write_results``, ``write_json``):
-#: removed by the next run that holds the folder's lock
-LEFTOVER_PATTERNS = ("data.zarr.tmp-*", "data.zarr.old-*", "*.json.tmp")
+#: what a run killed mid-write leaves in its output folder (``write_results``, ``write_json``,
+#: ``mc.sweep_store.write_atomic``'s ``.NAME.PID.tmp`` of sweep.json): removed by the next run
+#: that holds the folder's lock
+LEFTOVER_PATTERNS = ("data.zarr.tmp-*", "data.zarr.old-*", "*.json.tmp", ".*.tmp")
 
 
 def remove_leftovers(out_dir):

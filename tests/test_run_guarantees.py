@@ -167,7 +167,8 @@ def test_leftovers_of_a_killed_run_are_removed_by_the_next(tmp_path, toy):
     for d in left:
         d.mkdir()
         (d / "zarr.json").write_text("{")
-    left += [folder / "summary.json.tmp", folder / f"{LOCK_NAME}.tmp-{dead}-0123abcd"]
+    left += [folder / "summary.json.tmp", folder / f".sweep.json.{dead}.tmp",
+             folder / f"{LOCK_NAME}.tmp-{dead}-0123abcd"]
     for f in left[2:]:
         f.write_text("x")
     live = folder / f"{LOCK_NAME}.tmp-1-0123abcd"  # pid 1 runs: a lock being made
@@ -222,6 +223,19 @@ def test_a_bad_almanac_for_the_map_is_refused_before_anything_is_written(shared_
     assert r.exit_code == 2
     assert re.search(rf"alm\.txt: {message}", _one_line(r))
     assert not (out / "availability-map").exists()
+
+
+def test_near_duplicate_towers_for_the_map_are_one_line_before_anything_is_written(tmp_path):
+    """Two rows of one carrier 1e-9 deg apart counted as two independent ranges; the map's
+    tower file is read when the parameters are checked: one line, exit 2, nothing written."""
+    f = tmp_path / "towers.csv"
+    f.write_text("lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.010000001,0.0,40,A\n")
+    out = tmp_path / "out"
+    r = _run("run", "availability-map", "--quick", "--set", f"towers={f}", "--out", str(out),
+             "--no-progress")
+    assert r.exit_code == 2
+    assert "towers.csv, line 3: the tower of line 2 again (0.000111 m from it)" in _one_line(r)
+    assert not out.exists()
 
 
 # ---------------------------------------------------------------- sizes and advice
