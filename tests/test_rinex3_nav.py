@@ -192,3 +192,21 @@ def test_meaning_checks_name_the_line(shared_data, tmp_path, edit, message):
     msg = msg.replace(f"line {n}", f"line {end + 1 + n}", 1)
     with pytest.raises(geometry.NavigationFileError, match=r"bad\.rnx: " + msg):
         geometry.load_navigation(p)
+
+
+def test_cli_names_a_bad_navigation_file_in_one_line(shared_data, tmp_path):
+    """The replay with a merged navigation file cut inside a record: exit 2, one error line
+    naming the file and the line."""
+    from typer.testing import CliRunner
+
+    from oaraim.cli import app
+
+    lines = _lines(shared_data / BRDC[2024])
+    end = _header_end(lines)
+    p = _write(tmp_path, "cut.rnx", lines[:end + 1 + 8 * 40 + 3])
+    obs = shared_data / "obs3" / "TLSE00FRA_R_20240011800_01H_30S_MO.crx.gz"
+    res = CliRunner().invoke(app, ["run", "rinex-replay", "--set", f"obs={obs}", "--set",
+                                   f"nav={p}", "--out", str(tmp_path / "out")])
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
+    assert res.exit_code == 2 and "Traceback" not in res.output and len(errors) == 1, res.output
+    assert f"cut.rnx: line {end + 1 + 8 * 40 + 3}: the file ends inside the record" in errors[0]
