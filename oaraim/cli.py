@@ -173,8 +173,14 @@ def report(
         _fail(f"no study results under {out_dir}; run `oaraim run STUDY --out {out_dir}` first")
     print(text)
     if write is not None:
-        write.parent.mkdir(parents=True, exist_ok=True)
-        write.write_text(text + "\n")
+        from oaraim.mc.store import os_error_line, writing
+
+        try:
+            write.parent.mkdir(parents=True, exist_ok=True)
+            with writing(write):
+                write.write_text(text + "\n")
+        except OSError as e:
+            _fail(os_error_line(e, write).replace("another --out", "another --write"))
 
 
 @app.command()
@@ -215,7 +221,7 @@ def reproduce(
     if jobs < 1:
         _fail(f"--jobs must be >= 1, got {jobs}")
     from oaraim.mc.keys import check_seed
-    from oaraim.mc.store import OutputError, check_output_folder
+    from oaraim.mc.store import OutputError, check_output_folder, os_error_line, writing
 
     try:  # once, not one failure per study
         check_seed(seed)
@@ -264,9 +270,16 @@ def reproduce(
         err.print(f"{name}: {wall:.1f} s -> {sdir}", highlight=False)
         if results is not None:
             dest = results / name
-            dest.mkdir(parents=True, exist_ok=True)
-            for f in [*figures, sdir / "summary.json", sdir / "provenance.json"]:
-                shutil.copy2(f, dest / Path(f).name)
+            try:
+                dest.mkdir(parents=True, exist_ok=True)
+                for f in [*figures, sdir / "summary.json", sdir / "provenance.json"]:
+                    shutil.copy2(f, dest / Path(f).name)
+            except OSError as e:  # a full disk: this study fails, with the path
+                failures[name] = os_error_line(e, dest).replace("another --out",
+                                                                "another --results")
+                err.print(f"{name}: FAILED: {escape(failures[name])}", highlight=False,
+                          soft_wrap=True)
+                continue
     text = None
     if done:
         if quick:
@@ -274,7 +287,11 @@ def reproduce(
         else:
             folder = out_dir if results is None else results
             text = build_report(folder, figure_dir=folder, only=done)
-            (folder / "REPORT.md").write_text(text + "\n")
+            try:
+                with writing(folder / "REPORT.md"):
+                    (folder / "REPORT.md").write_text(text + "\n")
+            except OSError as e:
+                _fail(os_error_line(e, folder))
             err.print(f"wrote {folder / 'REPORT.md'}", highlight=False)
         print(text)
     if failures:

@@ -307,3 +307,16 @@ def test_every_test_that_docs_errors_names_exists():
     assert len(named) >= 15
     for file, name in named:
         assert re.search(rf"^def {name}\(", (root / file).read_text(), re.M), (file, name)
+
+
+def test_report_write_to_an_unusable_path_is_one_line(tmp_path):
+    """``oaraim report --write`` into a path that cannot be made ended in a traceback; now one
+    line naming the path (an OSError of the command, as of a run)."""
+    r = _run(*FAST, "--out", str(tmp_path / "out"))
+    assert r.exit_code == 0, r.output
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    r = _run("report", "--out", str(tmp_path / "out"), "--write", str(blocker / "REPORT.md"))
+    assert r.exit_code == 2 and "Traceback" not in r.output  # the report, then one error line
+    errors = [" ".join(ln.split()) for ln in r.output.splitlines() if ln.startswith("error:")]
+    assert errors == [f"error: {blocker}: File exists; check that path and its disk and rerun"]
