@@ -71,7 +71,7 @@ class Seed000EkfRaim(EkfDriveStudy):
         realizations=200, sets={"sens_mp_sigma_m": "0"})
     #: the fit's values (``oaraim calibrate seed000-ekf-raim``: 200 runs, 47 evaluations,
     #: 15.56 m and 1.424 m -> 6.78 / 3.48 m against 6.8 / 3.5 m), the study's defaults; seed
-    #: 002 keeps the error world's defaults
+    #: 002 has its own fit (``studies.seed002_outlier``)
     calibrated = {"fault_bias_m": 15.6, "mp_sigma_m": 1.43}
     #: NLOS episodes off (module docstring: they keep the with-exclusion RMSE above 4.2 m)
     chosen = {"nlos_rate_per_s": (0.0, "no NLOS episodes: with the world's 1/250 s per tower "

@@ -2,6 +2,8 @@
 
 import dataclasses
 import json
+import re
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -188,3 +190,33 @@ def test_seed002_tiny_run_rows(tmp_path):
     prov = json.loads((sdir / "provenance.json").read_text())
     assert prov["realizations"] == 3
     assert len(figures) == 4
+    # the calibration's six targets are the six Monte Carlo median rows, one row each
+    for t in STUDIES["seed002-outlier"].calibration.targets:
+        hits = [r for r in summary["rows"] if re.search(t.pattern, r["quantity"])]
+        assert len(hits) == 1 and "Monte Carlo median" in hits[0]["quantity"], t.pattern
+
+
+def test_seed002_defaults_are_its_calibrated_fit():
+    """Seed 002's outlier size and multipath sigma are the values of its declared fit (``oaraim
+    calibrate seed002-outlier``, 200 runs: 30.25 m and 2.065 m; docs/calibration.md), its NLOS
+    episodes the world's rate (not fitted: the six numbers leave it loose); the committed
+    results were run at those defaults, and their six Monte Carlo medians are within 15 % of
+    the poster's numbers."""
+    study = STUDIES["seed002-outlier"]
+    p = study.validate({})
+    assert study.calibrated == {"fault_bias_m": 30.3, "mp_sigma_m": 2.07}
+    assert p["fault_bias_m"] == 30.3 and p["mp_sigma_m"] == 2.07
+    assert p["nlos_rate_per_s"] == sim.ErrorModel().nlos_rate_per_s
+    cal = study.calibration
+    assert [f.name for f in cal.free] == list(study.calibrated)
+    assert all(f.low < p[f.name] < f.high for f in cal.free)
+    assert cal.realizations == study.default_realizations and len(cal.targets) == 6
+    folder = Path(__file__).resolve().parents[1] / "results" / study.name
+    if not (folder / "summary.json").is_file():
+        pytest.skip("no committed results beside the tests")
+    prov = json.loads((folder / "provenance.json").read_text())
+    assert {k: prov["parameters"][k] for k in study.calibrated} == study.calibrated
+    rows = json.loads((folder / "summary.json").read_text())["rows"]
+    for t in cal.targets:
+        (row,) = [r for r in rows if re.search(t.pattern, r["quantity"])]
+        assert abs(row["reproduced"] / row["published"] - 1) < 0.15, row

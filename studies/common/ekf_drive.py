@@ -97,6 +97,8 @@ class EkfDriveStudy(Study):
 
     #: parameter -> default fitted by ``oaraim calibrate`` (replaces the table's default)
     calibrated: dict = {}
+    #: what the ``calibrated`` parameters were fitted to (the summary rows' note)
+    calibrated_to: str = "the published RMSEs"
     #: parameter -> (default, why): a world parameter the study sets apart from the error
     #: world's default on its own evidence, not by a fit (replaces the table's default)
     chosen: dict = {}
@@ -367,7 +369,7 @@ class EkfDriveStudy(Study):
             return ("clean synthetic world: white noise, no multipath/NLOS besides the injected "
                     f"{p['fault_bias_m']:g} m fault, filter model = truth model: the "
                     "with-exclusion error is far smaller than the real drive's")
-        how = (f"{', '.join(sorted(self.calibrated))} calibrated to the published RMSEs "
+        how = (f"{', '.join(sorted(self.calibrated))} calibrated to {self.calibrated_to} "
                "(oaraim calibrate)" if self.calibrated else "not calibrated")
         if self.chosen:
             how += "; " + "; ".join(f"{k} = {v:g}: {why}" for k, (v, why) in self.chosen.items())
