@@ -484,8 +484,9 @@ def test_ed259a_airborne_model_hand_values_and_map():
     assert zen == pytest.approx(0.52589, abs=1e-5)
     assert float(sigma_user_ed259a_m(np.deg2rad(5.0))) < 0.51 * float(
         sigma_user_airborne_m(np.deg2rad(5.0)))
-    p = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0", "airborne_model": "ed259a"})
-    q = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0"})
+    p = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0"})
+    assert p["airborne_model"] == "ed259a"  # the default: MAAST for ARAIM 2's model
+    q = STUDY.validate({**SMALL, "lat_deg": "40", "lon_deg": "0", "airborne_model": "add"})
     a = STUDY.run(p, STUDY.fixed_realizations(p), 0).dataset["sigma_acc_m"].values
     b = STUDY.run(q, STUDY.fixed_realizations(q), 0).dataset["sigma_acc_m"].values
     assert np.all(np.isfinite(a)) and not np.allclose(a, b)

