@@ -16,8 +16,12 @@ of them when the file has fewer; default 2,880, a day at 30 s).
 Choices (none of them tuned on the results):
 
 * Integrity parameters of seed 004 section VII / Table I (its real-data experiment):
-  sigma_URA = 1 m, b_nom = 0.75 m, P_s = 1e-5, P_const = 1e-8, the Table I budget read by its
-  symbols (``araim.BUDGET_SEED004_TABLE_I``); ``hpl_median_m`` is this MHSS (ARAIM) HPL.
+  sigma_URA = 1 m, b_nom = 0.75 m, P_s = 1e-5, P_const = 1e-8. The integrity budget is
+  ``--set budget=``: ``lpv200`` (default, MAAST's LPV-200 allocation
+  ``araim.BUDGET_LPV200_MAAST``, the availability map's), ``lpv200-add`` (the ADD table) or
+  ``seed004-table-i`` (seed 004 Table I by its symbols, MAAST's H-ARAIM allocation); the
+  default pairs the LPV-200 budget with the LPV-200 alert limits of the Stanford diagrams, as
+  an aviation reader expects. ``hpl_median_m`` is this MHSS (ARAIM) HPL.
 * Nominal error model of a single-frequency L1 user (variances add, seed 004 App. A):
   C_int = sigma_URA^2 + sigma_iono^2 + sigma_tropo^2 + sigma_user^2 with sigma_iono of RTCA
   DO-229 J.2.3 for the Klobuchar model (max(delay / 5, F_pp tau_vert)), sigma_tropo the MOPS
@@ -27,13 +31,15 @@ Choices (none of them tuned on the results):
 * Chi-square slope RAIM: P_FA = 1e-5, P_MD = 1e-3 (as our seed 001 studies).
 * Elevation mask 5 deg (ARAIM practice, ADD; the error models above are defined down to it);
   seed 004's UAV experiment used 15 deg: ``--set mask_deg=15``.
-* HAL 40 m and VAL 35 m for the Stanford diagram and the availability shares (LPV-200 alert
-  limits; only the figure and two metrics use them).
+* HAL 40 m and VAL 35 m (LPV-200; ``--set hal_m=``, ``val_m=``) for the horizontal and
+  vertical Stanford diagrams (log axes, the regions of the WAAS / EGNOS reports shaded and
+  counted: ``studies.common.stanford``) and the availability shares.
 * A navigation header without Klobuchar coefficients: no ionospheric correction is applied (a
   warning; ``iono_model`` in the summary says so) and sigma_iono bounds the whole delay
   (F_pp tau_vert); ``--set iono=none`` does the same on purpose.
 """
 
+import json
 import warnings
 from pathlib import Path
 
@@ -59,6 +65,7 @@ from oaraim.studies.base import (
     probability,
 )
 from oaraim.studies.common.seed004 import B_NOM_GPS, P_CONST_GPS_PARAM, P_SAT_GPS
+from oaraim.studies.common.stanford import draw_stanford, stanford_counts
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"
@@ -71,6 +78,15 @@ SLOTS = (12, 16, 24, 32)
 #: first starts from the Earth's centre without them (tens of metres), the second is then
 #: exact to millimetres, the third confirms
 N_PASSES = 3
+
+
+#: ``budget``: the integrity budgets of the MHSS by name
+REPLAY_BUDGETS = {"lpv200": araim.BUDGET_LPV200_MAAST, "lpv200-add": araim.BUDGET_LPV200,
+                  "seed004-table-i": araim.BUDGET_SEED004_TABLE_I}
+BUDGET_NAMES = {"lpv200": "LPV-200 (MAAST)", "lpv200-add": "LPV-200 (ADD table)",
+                "seed004-table-i": "seed 004 Table I"}
+#: the Stanford diagrams: (name, error, PL, alert limit key) per axis
+STANFORD_AXES = (("horizontal", "hpe", "hpl", "hal_m"), ("vertical", "vpe", "vpl", "val_m"))
 
 
 #: 'auto' (the shared data file) or an existing file
@@ -261,7 +277,7 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
             c["var_acc_m2"][idx], v_c[idx], truth, correction_m=c["correction_m"][idx],
             p_const=(params["p_const"],), p_sat=params["p_sat"], b_nom_m=params["b_nom_m"],
             x0_m=x0[idx], config=snapshot.ReplayConfig(
-                budget=araim.BUDGET_SEED004_TABLE_I, p_fa=params["p_fa"], p_md=params["p_md"],
+                budget=REPLAY_BUDGETS[params["budget"]], p_fa=params["p_fa"], p_md=params["p_md"],
                 max_order=max_order, fault_modes=params["fault_modes"]))
         sl = slice(start, start + n)
         f = lambda a, n=n: np.asarray(a)[:n]  # noqa: E731
@@ -333,9 +349,13 @@ class RinexReplay(Study):
         "iono": Param("klobuchar", parse_choice("klobuchar", "none"), "ionospheric correction"),
         "tropo": Param("mops", parse_choice("mops", "none"),
                        "tropospheric correction (RTCA DO-229 A.4.2.4)"),
-        "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagram "
-                       "(LPV-200)", "m"),
-        "val_m": Param(35.0, positive, "vertical alert limit (LPV-200)", "m"),
+        "budget": Param("lpv200", parse_choice(*REPLAY_BUDGETS), "MHSS integrity budget: "
+                        "lpv200 (MAAST's LPV-200 allocation), lpv200-add (the ADD table) or "
+                        "seed004-table-i (seed 004 Table I, MAAST's H-ARAIM allocation)"),
+        "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagram and "
+                       "the availability share (LPV-200: 40 m; H-ARAIM: 185 m)", "m"),
+        "val_m": Param(35.0, positive, "vertical alert limit of the Stanford diagram and the "
+                       "availability share (LPV-200: 35 m)", "m"),
         "fault_modes": fault_modes_param("add-v4.2", "a GNSS receiver follows the current ADD"),
         "bad_epochs": Param("error", parse_choice("error", "skip"),
                             "a malformed, truncated or duplicated epoch of the observation file: "
@@ -370,7 +390,7 @@ class RinexReplay(Study):
         p_sat = np.full(inp["valid"].shape, params["p_sat"])
         max_order = required_order(inp["valid"], np.zeros(inp["valid"].shape, np.int32), p_sat,
                                    np.full((n_t, 1), params["p_const"]),
-                                   araim.BUDGET_SEED004_TABLE_I,
+                                   REPLAY_BUDGETS[params["budget"]],
                                    fault_modes=params["fault_modes"])
         out = replay_blocks(inp, truth, params, max_order, progress)
         return self._result(params, obs, nav_path, truth, truth_src, inp, out, max_order)
@@ -383,6 +403,7 @@ class RinexReplay(Study):
         lat, lon, h = float(np.rad2deg(lat_r)), float(np.rad2deg(lon_r)), h_m
         ep = ("epoch",)
         es = ("epoch", "sv")
+        m = metrics(out, params)
         ds = xr.Dataset(
             {k: (ep, out[k]) for k in out if out[k].ndim == 1}
             | {"error_e_m": (ep, out["error_enu_m"][:, 0]),
@@ -408,9 +429,10 @@ class RinexReplay(Study):
                    "truth_source": truth_src, "truth_lat_lon_h": [lat, lon, h],
                    "start_gps": str(gpstime.to_datetime64(t[0]))[:19] if n_t else "",
                    "iono_model": inp["iono_model"], "hal_m": params["hal_m"],
+                   "budget": BUDGET_NAMES[params["budget"]],
+                   "stanford_counts": json.dumps(m["stanford"]),
                    "val_m": params["val_m"], "mask_deg": params["mask_deg"],
                    "mhss_max_order": int(max_order), "sv_names": ",".join(obs.sv)})
-        m = metrics(out, params)
         m.update({"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
                   "code": obs.code, "truth_source": truth_src, "truth_ecef_m": list(truth),
                   "iono_model": inp["iono_model"], "mhss_max_order": int(max_order),
@@ -425,7 +447,8 @@ class RinexReplay(Study):
         rows = [
             {"quantity": f"median HPE, {Path(obs.path).name}", "unit": "m", "published": None,
              "reproduced": m["hpe_median_m"], "note": note},
-            {"quantity": "median HPL, ARAIM / MHSS (Table I)", "unit": "m", "published": None,
+            {"quantity": f"median HPL, ARAIM / MHSS ({BUDGET_NAMES[params['budget']]} "
+             "budget)", "unit": "m", "published": None,
              "reproduced": m["hpl_mhss_median_m"],
              "note": f"hpl_median_m; fault modes {params['fault_modes']}"},
             {"quantity": "median HPL, slope RAIM", "unit": "m", "published": None,
@@ -440,13 +463,13 @@ class RinexReplay(Study):
         return StudyResult(ds, rows, m, extra_provenance={
             "obs_file": obs.path, "nav_file": str(nav_path), "truth_source": truth_src,
             "skipped_epochs": list(obs.skipped),
-            "fault_modes": params["fault_modes"]})
+            "fault_modes": params["fault_modes"], "budget": params["budget"]})
 
     def plot(self, out_dir):
         """hpe_hpl_time.png (errors and protection levels over the day) and
-        stanford_diagram.png (horizontal: HPE against HPL, MHSS and slope RAIM)."""
+        stanford_diagram.png (horizontal and vertical, MHSS and slope RAIM: log axes, the
+        regions shaded and labelled with the counts the run stored)."""
         import matplotlib.pyplot as plt
-        from matplotlib.colors import LogNorm
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
         a = ds.attrs
@@ -458,7 +481,7 @@ class RinexReplay(Study):
 
         fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
         ax.semilogy(h, clip(ds["hpl_mhss_m"].values), color="tab:red", lw=1,
-                    label="HPL ARAIM / MHSS (Table I)")
+                    label=f"HPL ARAIM / MHSS ({a['budget']})")
         ax.semilogy(h, clip(ds["hpl_slope_m"].values), color="tab:orange", lw=1,
                     label="HPL slope RAIM")
         ax.semilogy(h, np.maximum(clip(ds["hpe_m"].values), 1e-3), color="k", lw=1, label="HPE")
@@ -484,44 +507,21 @@ class RinexReplay(Study):
         plt.close(fig)
         paths.append(p)
 
-        fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
-        for axx, (kind, label) in zip(axes, (("mhss", "ARAIM / MHSS"), ("slope", "slope RAIM")),
-                                      strict=True):
-            hpl = ds[f"hpl_{kind}_m"].values
-            hpe = ds[f"hpe_{kind}_m"].values
-            fin = np.isfinite(hpe)
-            lim = max(2 * hal, float(np.nanmax(np.where(np.isfinite(hpl), hpl, 0.0), initial=0)
-                                     ) * 1.05, 1.0)
-            lim = min(lim, 20 * hal)
-            xe = np.minimum(hpe[fin], lim * 0.999)
-            ye = np.minimum(np.where(np.isfinite(hpl[fin]), hpl[fin], lim), lim * 0.999)
-            bins = np.linspace(0, lim, 101)
-            if xe.size:
-                hist, xb, yb = np.histogram2d(xe, ye, bins=(bins, bins))
-                hist = np.where(hist > 0, hist, np.nan)
-                mesh = axx.pcolormesh(xb, yb, hist.T, norm=LogNorm(vmin=1, vmax=max(
-                    2, np.nanmax(hist))), cmap="viridis")
-                fig.colorbar(mesh, ax=axx, label="epochs")
-            axx.plot([0, lim], [0, lim], "k-", lw=0.8)
-            axx.axvline(hal, color="r", ls="--", lw=0.8)
-            axx.axhline(hal, color="r", ls="--", lw=0.8)
-            mi = int(np.sum(fin & np.isfinite(hpl) & (hpe > hpl)))
-            unav = int(np.sum(~np.isfinite(hpl) | (hpl > hal)))
-            n = hpl.size
-            axx.set_xlim(0, lim)
-            axx.set_ylim(0, lim)
-            axx.set_xlabel("HPE (m)")
-            axx.set_ylabel("HPL (m)")
-            axx.set_title(f"{label}: {n} epochs, MI (HPE > HPL) {mi}, HPL > HAL or inf {unav}",
-                          fontsize=8)
-            axx.text(0.98 * lim, 0.02 * lim, "MI", ha="right", va="bottom", fontsize=8)
-            axx.text(0.02 * lim, 0.98 * lim, "normal operation below HAL,\nunavailable above",
-                     ha="left", va="top", fontsize=7)
-        fig.suptitle(f"Stanford diagram, {a['obs_file']} (HAL {hal:g} m; inf PLs drawn at "
-                     "the top edge)", fontsize=9)
-        fig.tight_layout()
+        counts = json.loads(a["stanford_counts"])
+        fig, axes = plt.subplots(2, 2, figsize=(11, 10), layout="constrained")
+        for row, (name, err, pl, lim) in zip(axes, STANFORD_AXES, strict=True):
+            al = float(a[lim])
+            for axx, (kind, label) in zip(row, (("mhss", f"ARAIM / MHSS, {a['budget']} budget"),
+                                                ("slope", "slope RAIM")), strict=True):
+                draw_stanford(fig, axx, ds[f"{err}_{kind}_m"].values,
+                              ds[f"{pl}_{kind}_m"].values, al, counts[f"{kind}_{name}"],
+                              error_label=f"{err.upper()} (m)", pl_label=f"{pl.upper()} (m)",
+                              title=f"{name}, {label}; {'HAL' if lim == 'hal_m' else 'VAL'} "
+                                    f"{al:g} m")
+        fig.suptitle(f"Stanford diagrams, {a['obs_file']} ({a['code']}, {len(ds['epoch'])} "
+                     f"epochs; truth: {a['truth_source']})", fontsize=9)
         p = f"{out_dir}/stanford_diagram.png"
-        fig.savefig(p, dpi=120)
+        fig.savefig(p, dpi=110)
         plt.close(fig)
         paths.append(p)
         return paths
@@ -567,6 +567,9 @@ def metrics(out, params):
         m[f"exclusions_{kind}"] = int(np.sum(np.any(out[f"{kind}_excluded"], -1)))
         m[f"exclusion_failures_{kind}"] = int(np.sum(out[f"{kind}_status"]
                                                      == araim.Status.EXCLUSION_FAILED))
+    m["stanford"] = {f"{kind}_{name}": stanford_counts(out[f"{err}_{kind}_m"],
+                                                       out[f"{pl}_{kind}_m"], params[lim])
+                     for kind in ("mhss", "slope") for name, err, pl, lim in STANFORD_AXES}
     m["hpl_median_m"] = m["hpl_mhss_median_m"]
     m["vpl_median_m"] = m["vpl_mhss_median_m"]
     m["misleading_information_epochs"] = m["misleading_information_epochs_mhss"]

@@ -1,7 +1,11 @@
 """Figures 6-9 of the seed004-uav study, drawn from its stored ``data.zarr`` only."""
 
+import json
+
 import numpy as np
 import xarray as xr
+
+from oaraim.studies.common.stanford import draw_stanford
 
 #: Stanford-diagram configurations of Fig. 9
 STANFORD_SOPS = (0, 1, 2, 4, 8)
@@ -67,7 +71,7 @@ def plot_uav(out_dir):
     plt.close(fig)
     files.append("fig7_detection_sensitivity.png")
     # Fig. 8
-    fig, ax = plt.subplots(figsize=(7, 3.8))
+    fig, ax = plt.subplots(figsize=(8, 3.8))
     cmap = plt.get_cmap("viridis")
     for i, n in enumerate(n_sops):
         if 1 <= n <= 8:
@@ -76,36 +80,31 @@ def plot_uav(out_dir):
     ax.set_xlabel("time (s)")
     ax.set_ylabel("HPL reduction (m)")
     ax.set_title("Seed 004 Fig. 8: HPL(GPS) - HPL(GPS + n SOPs)", fontsize=9)
-    ax.legend(fontsize=7, ncol=4)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     fig.savefig(f"{out_dir}/fig8_hpl_reduction.png", dpi=130)
     plt.close(fig)
     files.append("fig8_hpl_reduction.png")
-    # Fig. 9
+    # Fig. 9: horizontal Stanford diagrams (log axes, regions shaded and counted)
     sel = [i for i, n in enumerate(n_sops) if n in STANFORD_SOPS]
-    fig, axes = plt.subplots(1, len(sel), figsize=(3.0 * len(sel), 3.2), squeeze=False)
+    counts = json.loads(a["stanford_counts"])
     hal = float(a["hal_m"])
-    top = max(hal * 1.5, float(np.nanmax(np.where(np.isfinite(hpl), hpl, 0))) * 1.1)
-    for ax, i in zip(axes[0], sel, strict=True):
-        h = np.minimum(hpl[i], top)
-        e = np.minimum(hpe[i], top)
-        mi = int(ds["mi_count"].values[i])
-        ax.plot([0, top], [0, top], "k", lw=0.6)
-        ax.axvline(hal, color="r", lw=0.6)
-        ax.axhline(hal, color="r", lw=0.6)
-        ax.plot(e, h, ".", ms=1.5, alpha=0.5)
-        ax.set_xlim(0, top)
-        ax.set_ylim(0, top)
+    ncol = min(3, len(sel))
+    nrow = -(-len(sel) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.2 * nrow), squeeze=False,
+                             layout="constrained")
+    for ax, i in zip(axes.ravel(), sel, strict=False):
         lo, hi = ds["mi_ci_low"].values[i], ds["mi_ci_high"].values[i]
-        ax.set_title(f"GPS + {n_sops[i]} SOPs: MI {mi}\n(95 % CI {100 * lo:.2g}-"
-                     f"{100 * hi:.2g} %)", fontsize=8)
-        ax.set_xlabel("HPE (m)", fontsize=8)
-    axes[0][0].set_ylabel("HPL (m)")
+        draw_stanford(fig, ax, hpe[i], hpl[i], hal, counts[str(int(n_sops[i]))],
+                      error_label="HPE (m)", pl_label="HPL (m)",
+                      title=f"GPS + {n_sops[i]} SOPs, HAL {hal:g} m: MI 95 % CI "
+                            f"{100 * lo:.2g}-{100 * hi:.2g} %")
+    for ax in axes.ravel()[len(sel):]:
+        ax.axis("off")
     inj = float(a.get("inject_sop_bias_m", 0.0))
     extra = f"; injected {inj:g} m on SOP {a['inject_sop']}" if inj else ""
     fig.suptitle(f"Seed 004 Fig. 9: Stanford diagrams (MHSS all-in-view){extra}", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(f"{out_dir}/fig9_stanford.png", dpi=130)
+    fig.savefig(f"{out_dir}/fig9_stanford.png", dpi=110)
     plt.close(fig)
     files.append("fig9_stanford.png")
     return [f"{out_dir}/{f}" for f in files]

@@ -1,5 +1,7 @@
 """The seed004-uav study itself (the package docstring describes it)."""
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,6 +38,7 @@ from oaraim.studies.common.seed004 import (
     P_SAT_GPS,
     resolve_sky,
 )
+from oaraim.studies.common.stanford import stanford_counts
 from oaraim.studies.seed004_uav.plots import plot_uav
 from oaraim.studies.seed004_uav.towers import tower_operators, towers_enu_m
 
@@ -493,6 +496,7 @@ class Seed004Uav(Study):
         med_hpe = {n: float(np.median(hpe[i])) for i, n in enumerate(configs)}
         hal = params["hal_m"]
         normal_all = float(np.mean((hpe[-1] <= hpl[-1]) & (hpl[-1] <= hal)))
+        stanford = {str(n): stanford_counts(hpe[i], hpl[i], hal) for i, n in enumerate(configs)}
         f_gps, f_sop = fault["gps"], fault["sop1"]
         sep_diff = float(np.max(np.abs(f_gps["sep"] - f_sop["sep"])))
         thr_ratio = float(np.median(f_sop["thr"][:, :2] / f_gps["thr"][:, :2]))
@@ -532,7 +536,7 @@ class Seed004Uav(Study):
             "t_detect_noise_free_sop1_s": f_sop["t_detect_noise_free"],
             "exclusion": int(excl is not None),
             "inject_sop_bias_m": params["inject_sop_bias_m"], "inject_sop": params["inject_sop"],
-            "world": world})
+            "world": world, "stanford_counts": json.dumps(stanford)})
         hpl_fig6 = excl["hpl"] if excl is not None else hpl[-1]
         hpe_fig6 = excl["hpe"] if excl is not None else hpe[-1]
         mi6 = int(np.sum(np.isfinite(hpl_fig6) & (hpe_fig6 > hpl_fig6)))
@@ -618,6 +622,7 @@ class Seed004Uav(Study):
             "mean_hpl_reduction_m": {str(n): v for n, v in red.items()},
             "share_epochs_hpl_reduced": {str(n): v for n, v in reduced.items()},
             "misleading_information_epochs": {str(n): v for n, v in mi.items()},
+            "stanford_counts": stanford,
             "misleading_information_rate": {str(n): v for n, v in mi_rate.items()},
             "inject_sop_bias_m": params["inject_sop_bias_m"], "inject_sop": params["inject_sop"],
             "world": world, "error_rms_gps_m": res["error_rms_m"]["gps"],
