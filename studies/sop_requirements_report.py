@@ -5,6 +5,7 @@ import xarray as xr
 
 from oaraim.studies.base import StudyResult
 from oaraim.studies.common import seed004 as c
+from oaraim.studies.common.plotting import P_S_SOP_LABEL, SIGMA_URA_SOP_LABEL, categorical_ticks
 
 
 def within_one_step(root, bound, grid=c.SIGMA_GRID_M):
@@ -86,8 +87,8 @@ def plot(ds, out_dir):
         ax.plot(cps, b, "s", mfc="none", ms=9, color=line.get_color())
     ax.plot([], [], "ks", mfc="none", label="Fig. 4 grid boundary (same draws)")
     ax.set_xscale("log")
-    ax.set_xlabel("P_s^S")
-    ax.set_ylabel("largest sigma_URA^S still lowering the mean HPL (m)")
+    ax.set_xlabel(P_S_SOP_LABEL)
+    ax.set_ylabel(r"largest $\sigma_{\mathrm{URA}}^{S}$ still lowering the mean HPL (m)")
     ax.set_title(f"SOP requirements ({ds.attrs['realizations']} draws; Newton "
                  f"{ds.attrs['evaluations_newton']} evaluations, grid "
                  f"{ds.attrs['evaluations_grid']})", fontsize=9)
@@ -105,20 +106,23 @@ def plot(ds, out_dir):
     sig = ds["map_sigma_ura_sop_m"].values
     mp = ds["map_p_s_sop"].values
     for col, n in enumerate(mn):
-        for row, (var, what) in enumerate((("map_dhpl_dsigma", "d mean HPL / d sigma_URA^S"),
-                                           ("map_dhpl_dlog10_p_s_m",
-                                            "d mean HPL / d log10 P_s^S (m)"))):
+        for row, (var, what) in enumerate((
+                ("map_dhpl_dsigma", r"$\partial$ mean HPL / $\partial\sigma_{\mathrm{URA}}^{S}$"
+                 " (m/m)"),
+                ("map_dhpl_dlog10_p_s_m", r"$\partial$ mean HPL / $\partial\log_{10}P_{s}^{S}$"
+                 " (m)"))):
             ax = axes[row, col]
             z = ds[var].values[col]
             lim = float(np.nanmax(np.abs(z))) or 1.0
             im = ax.pcolormesh(np.arange(sig.size), np.arange(mp.size), z, cmap="RdBu_r",
                                vmin=-lim, vmax=lim, shading="nearest")
-            ax.set_xticks(np.arange(sig.size), [f"{s:g}" for s in sig], fontsize=7)
-            ax.set_yticks(np.arange(mp.size), [f"{p:g}" for p in mp], fontsize=7)
-            ax.set_xlabel("sigma_URA^S (m)")
-            ax.set_ylabel("P_s^S")
+            categorical_ticks(ax.xaxis, sig)
+            categorical_ticks(ax.yaxis, mp, powers_of_ten=True)
+            ax.tick_params(labelsize=7)
+            ax.set_xlabel(SIGMA_URA_SOP_LABEL)
+            ax.set_ylabel(P_S_SOP_LABEL)
             ax.set_title(f"{n} SOPs: {what}", fontsize=9)
-            fig.colorbar(im, ax=ax)
+            fig.colorbar(im, ax=ax, label="symmetric scale: +- the panel's largest |value|")
     p = f"{out_dir}/sop_requirements_sensitivity.png"
     fig.savefig(p, dpi=110)
     plt.close(fig)
