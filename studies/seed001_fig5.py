@@ -429,10 +429,12 @@ class Fig5Madrid24h(Study):
         if inf.any():
             ax.plot(h[inf], np.full(inf.sum(), top), "|", color="tab:blue", ms=6,
                     label="GPS only unavailable (HPL = inf)")
-        ax.axhline(a["hpl_threshold_m"], color="k", lw=0.8, ls="--")
+        ax.axhline(a["hpl_threshold_m"], color="k", lw=0.8, ls="--",
+                   label=f"{a['hpl_threshold_m']:g} m: the episodes counted above it")
         ax.set_ylim(0, top)
         ax.set_ylabel("HPL (m)")
-        ax.set_title(f"Seed 001 Fig. 5(a) at MDSCC: {a['sky_source']}", fontsize=9)
+        ax.set_title(f"Seed 001 Fig. 5(a) at MDSCC (HPLs above {top:g} m drawn at the top "
+                     f"edge)\n{a['sky_source']}", fontsize=8)
         ax.legend(loc="upper right", fontsize=7)
         ax.grid(alpha=0.3)
         ax2.step(h, ds["n_gps_visible"].values, where="post", color="k", lw=0.8)
