@@ -266,3 +266,16 @@ def test_crinex_decoder_skipping_data_is_an_error(tlse, tmp_path):
         rinex_obs.read_observation_table(p)
     with pytest.raises(rinex_obs.ObservationFileError, match="no observation epochs"):
         rinex_obs.read_observation_table(p, lenient=True)
+
+
+def test_crinex1_of_a_rinex2_file(shared_data, tmp_path):
+    """CRINEX 1 (Hatanaka-compressed RINEX 2, '.yyd'), written here with the same package's
+    compressor: the same observations as the RINEX 2 file."""
+    import hatanaka
+
+    src = shared_data / "obs" / "07590920.05o"
+    crx = hatanaka.rnx2crx(src.read_bytes())
+    assert crx[:20].strip() == b"1.0"
+    p = tmp_path / "07590920.05d"
+    p.write_bytes(crx)
+    _equal_tables(rinex_obs.read_observation_table(src), rinex_obs.read_observation_table(p))
