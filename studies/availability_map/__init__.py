@@ -572,7 +572,8 @@ class AvailabilityMap(SweepStudy):
                  "reproduced": metrics["coverage_pct"],
                  "note": "area-weighted (cos latitude); no seed publishes a map, MAAST is the "
                  f"reference implementation; fault modes {params['fault_modes']}, position "
-                 f"estimator {params['position_opt']}"},
+                 f"estimator {params['position_opt']}, airborne model "
+                 f"{params['airborne_model']} (MAAST for ARAIM 2: ed259a)"},
                 {"quantity": "mean availability over the grid", "unit": "%", "published": None,
                  "reproduced": metrics["availability_mean_pct"],
                  "note": f"fault modes {params['fault_modes']}, position estimator "
