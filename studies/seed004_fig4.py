@@ -71,11 +71,13 @@ def grid_lacks(grid, needs):
 
 def graded(row, grid, needs, what):
     """``row`` as it is when the grid has the cells of the finding (``needs``); otherwise
-    not graded: no published number beside it and the note says what the grid lacks."""
+    not graded: no published number beside it, the quantity says so and the note says what
+    the grid lacks."""
     lacks = grid_lacks(grid, needs)
     if not lacks:
         return row
-    return {**row, "published": None,
+    return {**row, "quantity": f"{row['quantity']} [not graded: grid lacks cells]",
+            "published": None,
             "note": f"not graded: grid lacks {lacks} ({what}); value on this grid only: "
                     f"{row['note']}"}
 

@@ -168,6 +168,7 @@ def test_fig4_findings_graded_only_on_grids_that_hold_their_cells():
     assert graded(row, full, full, "w") is row
     g = graded(row, grid, full, "the cells")
     assert g["published"] is None and g["reproduced"] == 87.5
+    assert g["quantity"] == "x [not graded: grid lacks cells]"
     assert g["note"].startswith("not graded: grid lacks n_sops 3, 4, 5, 6")
     assert q["n_sops"] == (2, 8)
 
