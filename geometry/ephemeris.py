@@ -68,6 +68,13 @@ DEFAULT_MAX_AGE_S = 4 * 3600.0
 #: Galileo 0.2, for E14/E18 at ~0.16)
 E_MAX = max(lim.e_max for lim in ORBIT_LIMITS.values())
 
+#: record fields kept per record besides the orbit and clock, readable with
+#: ``Ephemeris.record_field`` (RINEX 3.05 Tables A6/A8: GPS T_GD; Galileo data source, BGDs, SISA)
+RECORD_FIELDS = ("TGD", "DataSrc", "BGDe5a", "BGDe5b", "SISA")
+#: Galileo data-source masks (RINEX 3.05 Table A8, field 'Data sources'): I/NAV records set
+#: bit 0 (E1-B) and/or bit 2 (E5b-I), F/NAV records bit 1 (E5a-I)
+GALILEO_SOURCES = {"inav": 0b101, "fnav": 0b010}
+
 #: RINEX 3 systems of navigation records (lines per record: ``rinex_nav3.record_lines``)
 _RINEX3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
 _FIELD = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([EeD][-+]?\d+)?\s*$")
@@ -378,7 +385,7 @@ def _record_table(ds, systems, path_str):
     toc = gpstime.from_datetime64(ds["time"].values)
     names = ("SVclockBias", "SVclockDrift", "SVclockDriftRate", "Crs", "DeltaN", "M0", "Cuc",
              "Eccentricity", "Cus", "sqrtA", "Toe", "Cic", "Omega0", "Cis", "Io", "Crc", "omega",
-             "OmegaDot", "IDOT", "health", "GPSWeek", "GALWeek")
+             "OmegaDot", "IDOT", "health", "GPSWeek", "GALWeek", *RECORD_FIELDS)
     v = {n: _var(ds, n, nt, ns) for n in names}
     rows = []
     for j, sv in enumerate(svs):
@@ -491,6 +498,7 @@ class Ephemeris:
             "mu": np.where(gal, MU_GAL_M3_S2, MU_GPS_M3_S2) * np.ones((1, r_max)),
             "f_rel": np.where(gal, F_GAL_S_SQRT_M, F_GPS_S_SQRT_M) * np.ones((1, r_max)),
         }
+        self._fields = {n: take(pad(t[n])) for n in RECORD_FIELDS if n in t}
         self._device = None
 
     def __repr__(self):
@@ -540,6 +548,20 @@ class Ephemeris:
         ecef, clock, valid, age_s = _propagate(params, toe_h, toe_u, sat_ok, t, age)
         return SatState(ecef, clock, valid, age_s, self.prns[idx])
 
+    def record_field(self, name, t_gps_s, prns=None) -> np.ndarray:
+        """(T, S) field ``name`` of ``RECORD_FIELDS`` (in the file's units: seconds for T_GD and
+        the BGDs, metres for SISA) of the record ``sat_state`` uses at each t (NaN where the
+        satellite is not valid there)."""
+        if name not in self._fields:
+            raise ValueError(f"record field {name!r} is not kept; one of {RECORD_FIELDS}")
+        idx = self._select(prns)
+        st = self.sat_state(t_gps_s, prns)
+        t = jnp.atleast_1d(jnp.asarray(t_gps_s, jnp.float64))
+        k = np.asarray(jax.vmap(_nearest, in_axes=(0, None))(
+            jnp.asarray(self._toe_healthy[idx]), t)[0])  # (S, T)
+        out = np.take_along_axis(self._fields[name][idx], k, axis=1).T
+        return np.where(np.asarray(st.valid), out, np.nan)
+
     def sat_position_ecef(self, t_gps_s, prns=None):
         """``(ecef (T, S, 3) metres, valid (T, S), prns (S,))`` at GPS times ``t_gps_s`` (T,).
 
@@ -588,13 +610,17 @@ def _propagate(params, toe_healthy, toe_unhealthy, sat_ok, t, max_age_s):
             jnp.where(v, tt - g["toe_s"], 0.0))
 
 
-def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S) -> Ephemeris:
+def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S,
+                    galileo_source=None) -> Ephemeris:
     """Broadcast ephemerides of a RINEX 2 (GPS) or RINEX 3 navigation file (plain or .gz).
 
     Args:
       path: the file.
       systems: RINEX system letters to keep ('G' GPS, 'E' Galileo).
       max_age_s: largest |t - t_oe| of a usable record (default 4 h).
+      galileo_source: None (every Galileo record, I/NAV and F/NAV alike), 'fnav' (only F/NAV
+        records: clock for E1/E5a) or 'inav' (only I/NAV: clock for E1/E5b), see
+        ``geometry.galileo_nav``.
 
     Raises:
       NavigationFileError: (a ValueError) naming the file and line when the file is missing,
@@ -607,6 +633,15 @@ def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S) -> Ep
     bad = [s for s in systems if s not in SYSTEM_CODES]
     if bad:
         raise ValueError(f"systems must be among 'G' (GPS) and 'E' (Galileo), got {bad}")
+    if galileo_source is not None and galileo_source not in GALILEO_SOURCES:
+        raise ValueError(f"galileo_source must be None, 'inav' or 'fnav', got {galileo_source!r}")
     st = os.stat(p)
     table = _parsed_records(str(p.resolve()), st.st_mtime_ns, st.st_size, tuple(systems))
+    if galileo_source is not None:
+        gal = np.char.startswith(table["sv"].astype(str), "E")
+        src = table["DataSrc"].astype(np.int64) & GALILEO_SOURCES[galileo_source]
+        keep = ~gal | (src != 0)
+        if not keep.any():
+            raise NavigationFileError(f"{p}: no {galileo_source} Galileo records to load")
+        table = {k: v[keep] for k, v in table.items()}
     return Ephemeris(table, p, max_age_s)

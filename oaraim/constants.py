@@ -44,3 +44,17 @@ WGS84_SOMIGLIANA_K = 0.00193185265241
 #: term of NIMA TR8350.2 eq. (4-3), 2 gamma_e (1 + f + m) / a, at the equator (the
 #: latitude-dependent and second-order terms change it by < 0.3 % below 1 km)
 FREE_AIR_GRADIENT_PER_S2 = 3.0877e-6
+
+#: Global-average SISRE weights (w_R, w_AC^2) of the radial and the along/cross-track orbit errors,
+#: SISRE = sqrt((w_R R - c dt)^2 + w_AC^2 (A^2 + C^2)): the user-averaged projection over the
+#: visible Earth for each orbit altitude (Montenbruck, Steigenberger, Hauschild, "Broadcast
+#: versus precise ephemerides: a multi-GNSS perspective", GPS Solutions 19 (2015) 321-333,
+#: Table of SISRE weight factors): GPS (20,200 km) 0.98 and 1/49, Galileo (23,200 km) 0.98 and
+#: 1/61, BeiDou MEO 0.98 and 1/54
+SISRE_WEIGHTS = {"G": (0.98, 1.0 / 49.0), "E": (0.98, 1.0 / 61.0), "C": (0.98, 1.0 / 54.0)}
+
+#: Galileo carrier frequencies, Hz (Galileo OS SIS ICD Issue 2.0, Table 2: E1 1575.42 MHz, E5a
+#: 1176.45 MHz, E5b 1207.14 MHz)
+F_E1_HZ = 1575.42e6
+F_E5A_HZ = 1176.45e6
+F_E5B_HZ = 1207.14e6
