@@ -23,7 +23,7 @@ same way. Precise clocks leave out the periodic relativistic term that broadcast
 Centre of mass vs antenna. Precise orbits (SP3) give the centre of mass, broadcast orbits the
 antenna phase centre; no antenna offset is applied here (the IGS ANTEX values are not available
 to this package). The offset is radial, towards the Earth: the measured mean radial error on
-2023-01-01 is -0.7 to -1.6 m per GPS satellite (by block) and -0.7 to -0.9 m per Galileo one.
+2023-01-01 is -0.6 to -1.6 m per GPS satellite (by block) and -0.7 to -0.9 m per Galileo one.
 Like the clock datum, its constellation-wide part is a common range offset, so ``sisre_m``
 removes the per-epoch constellation mean of the range error w_R R - c dt (both datums at once:
 SISRE = sqrt((w_R (R - mean R) - c dt)^2 + w_AC^2 (A^2 + C^2)) with c dt already less its mean);
