@@ -151,7 +151,8 @@ def test_fnav_and_inav_records_of_e11(day):
 
 #: published bounds: GPS SPS Performance Standard, 5th ed. (2020), Table 3.4-1: SIS URE
 #: <= 2.0 m 95 % (global average, normal operations, all AODs); Galileo OS Service Definition
-#: Document: SIS ranging accuracy (SISE) <= 7 m 95 %
+#: Document: SIS ranging accuracy <= 7 m, the 95th percentile of the instantaneous
+#: global-average SISE (per satellite and per constellation, over 30 days there; one day here)
 PUBLISHED_95_M = {"G": 2.0, "E": 7.0}
 #: regression bounds over the measured day (median, 95 %, max; measured in the docs row):
 #: SISRE, |clock|, 3D orbit
