@@ -81,9 +81,10 @@ from oaraim.geometry.rinex_obs import (  # noqa: E402
 __all__ += ["ObservationFileError", "ObservationTable", "Observations", "atmosphere",
             "read_observation_table", "read_observations", "rinex_obs"]
 
-from oaraim.geometry import galileo_nav, rinex_clk, sis_error  # noqa: E402
+from oaraim.geometry import beidou_nav, galileo_nav, rinex_clk, sis_error  # noqa: E402
 from oaraim.geometry.rinex_clk import ClockFileError, PreciseClocks, read_clock_rinex  # noqa: E402
 from oaraim.geometry.sis_error import SISError, compare_broadcast_precise  # noqa: E402
 
-__all__ += ["ClockFileError", "PreciseClocks", "SISError", "compare_broadcast_precise",
-            "galileo_nav", "read_clock_rinex", "rinex_clk", "sis_error"]
+__all__ += ["ClockFileError", "PreciseClocks", "SISError", "beidou_nav",
+            "compare_broadcast_precise", "galileo_nav", "read_clock_rinex", "rinex_clk",
+            "sis_error"]

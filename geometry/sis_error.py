@@ -1,5 +1,6 @@
 """Signal-in-space error of broadcast ephemerides: broadcast minus precise orbits and clocks.
 
+For GPS and Galileo (``geometry.Ephemeris``) and BeiDou MEO/IGSO (``geometry.beidou_nav``).
 Per satellite and epoch: the orbit error dr = r_broadcast - r_precise (ECEF, metres) split into
 radial R, along-track A and cross-track C (R along r, C along r x v with the inertial velocity
 v = v_ECEF + Omega_e x r, A = C x R), its 3D norm, the clock error c (dt_broadcast -
@@ -86,7 +87,7 @@ def rac_unit_vectors(ecef_m, vel_ecef_m_s):
 
 
 def sis_errors(sats, broadcast_ecef_m, broadcast_vel_m_s, broadcast_clock_s, precise_ecef_m,
-               precise_clock_s, valid) -> SISError:
+               precise_clock_s, valid, weights=None) -> SISError:
     """Broadcast-minus-precise orbit, clock and SISRE errors (module docstring).
 
     Args:
@@ -96,6 +97,8 @@ def sis_errors(sats, broadcast_ecef_m, broadcast_vel_m_s, broadcast_clock_s, pre
       precise_ecef_m: (E, S, 3) precise (centre-of-mass) positions.
       precise_clock_s: (E, S) precise clock offsets.
       valid: (E, S) bool: where all four are present.
+      weights: {satellite: (w_R, w_AC^2)} for satellites whose weights are not their system's
+        (BeiDou IGSO: ``SISRE_WEIGHTS["C_IGSO"]``).
     """
     sats = np.asarray(sats).astype(str)
     systems = np.array([s[0] for s in sats])
@@ -119,6 +122,11 @@ def sis_errors(sats, broadcast_ecef_m, broadcast_vel_m_s, broadcast_clock_s, pre
     for sysch in set(systems):
         cols = systems == sysch
         w_r[cols], w_ac2[cols] = SISRE_WEIGHTS[sysch]
+    for j, sat in enumerate(sats):
+        if weights is not None and sat in weights:
+            w_r[j], w_ac2[j] = weights[sat]
+    for sysch in set(systems):
+        cols = systems == sysch
         x = np.where(ok[:, cols], dclk[:, cols], 0.0)
         n = ok[:, cols].sum(1)
         mean = np.where(n > 0, x.sum(1) / np.maximum(n, 1), np.nan)
@@ -134,19 +142,23 @@ def sis_errors(sats, broadcast_ecef_m, broadcast_vel_m_s, broadcast_clock_s, pre
 
 
 def compare_broadcast_precise(ephemeris, orbits, clocks=None, t_gps_s=None,
-                              systems=("G", "E")) -> SISError:
+                              systems=("G", "E"), weights=None, prns=None) -> SISError:
     """``sis_errors`` of a broadcast ``geometry.Ephemeris`` against precise ``orbits``
     (``geometry.read_sp3``) and ``clocks`` (``geometry.rinex_clk.read_clock_rinex``; None uses
     the SP3 clocks; either way the periodic relativistic term -2 r.v / c^2 is added to them, as
     the broadcast clock has it), for the satellites of ``systems`` present in all of them, at
     ``t_gps_s`` (default: the SP3 epochs). Precise values are taken at the SP3 / clock epochs
     themselves (no interpolation): every t must be an epoch of both files. The broadcast
-    velocity is the central difference of positions 0.5 s either side.
+    velocity is the central difference of positions 0.5 s either side. ``ephemeris`` may also
+    be a ``geometry.beidou_nav.BeidouEphemeris``; ``weights`` as in ``sis_errors``; ``prns``
+    limits the comparison (and so the clock datum) to those satellites.
     """
     t = np.asarray(orbits.t_gps_s if t_gps_s is None else t_gps_s, np.float64)
     sats = [str(s) for s in ephemeris.prns if s[0] in systems and s in set(orbits.prns)]
     if clocks is not None:
         sats = [s for s in sats if s in set(clocks.sats)]
+    if prns is not None:
+        sats = [s for s in sats if s in {str(p) for p in prns}]
     if not sats:
         raise ValueError("no satellite is in the broadcast file, the orbits and the clocks")
 
@@ -175,7 +187,8 @@ def compare_broadcast_precise(ephemeris, orbits, clocks=None, t_gps_s=None,
     # precise clocks leave out the periodic relativistic term (IGS convention; IERS
     # Conventions 2010, 10.2: dt_rel = -2 r.v / c^2), which the broadcast clock includes
     rel = -2.0 * np.sum(ecef * vel, -1) / C_M_S ** 2
-    return sis_errors(sats, ecef, vel, np.asarray(st.clock_s), p_ecef, p_clk + rel, ok)
+    return sis_errors(sats, ecef, vel, np.asarray(st.clock_s), p_ecef, p_clk + rel, ok,
+                      weights)
 
 
 def summary(err: SISError, system: str) -> dict:

@@ -50,11 +50,25 @@ FREE_AIR_GRADIENT_PER_S2 = 3.0877e-6
 #: visible Earth for each orbit altitude (Montenbruck, Steigenberger, Hauschild, "Broadcast
 #: versus precise ephemerides: a multi-GNSS perspective", GPS Solutions 19 (2015) 321-333,
 #: Table of SISRE weight factors): GPS (20,200 km) 0.98 and 1/49, Galileo (23,200 km) 0.98 and
-#: 1/61, BeiDou MEO 0.98 and 1/54
-SISRE_WEIGHTS = {"G": (0.98, 1.0 / 49.0), "E": (0.98, 1.0 / 61.0), "C": (0.98, 1.0 / 54.0)}
+#: 1/61, BeiDou MEO 0.98 and 1/54, BeiDou IGSO/GEO 0.99 and 1/126 (key 'C_IGSO')
+SISRE_WEIGHTS = {"G": (0.98, 1.0 / 49.0), "E": (0.98, 1.0 / 61.0), "C": (0.98, 1.0 / 54.0),
+                 "C_IGSO": (0.99, 1.0 / 126.0)}
 
 #: Galileo carrier frequencies, Hz (Galileo OS SIS ICD Issue 2.0, Table 2: E1 1575.42 MHz, E5a
 #: 1176.45 MHz, E5b 1207.14 MHz)
 F_E1_HZ = 1575.42e6
 F_E5A_HZ = 1176.45e6
 F_E5B_HZ = 1207.14e6
+
+#: BeiDou Time: GPS time minus BDT, s, and the GPS week of BDT week 0 (BDT starts 2006-01-01
+#: 00:00:00 UTC, when GPS - UTC was 14 s: BDS-SIS-ICD-B1I Version 3.0 (2019), 4.1.2)
+GPS_MINUS_BDT_S = 14.0
+BDT_WEEK_OFFSET = 1356
+#: CGCS2000 constants of the BeiDou broadcast orbit (BDS-SIS-ICD-B1I 3.0, 5.2.4.10): GM,
+#: m^3/s^2, and the Earth rotation rate, rad/s
+MU_BDS_M3_S2 = 3.986004418e14
+OMEGA_E_BDS_RAD_S = 7.2921150e-5
+#: BeiDou B1I and B3I carrier frequencies, Hz (BDS-SIS-ICD-B1I 3.0, 3.1: 1561.098 MHz;
+#: BDS-SIS-ICD-B3I 1.0, 3.1: 1268.52 MHz)
+F_B1I_HZ = 1561.098e6
+F_B3I_HZ = 1268.52e6
