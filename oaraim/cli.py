@@ -4,9 +4,11 @@ User errors (a bad ``--set`` value, an unknown study or key) print one line nami
 wrong and exit with status 2, without a traceback.
 """
 
+import contextlib
 import json
 import shutil
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -34,6 +36,27 @@ def _fail(msg: str):
 def _warn(msg: str):
     """A one-line notice on stderr (a run that took over a dead run's lock)."""
     err.print(f"[bold yellow]warning:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """A study's own warnings (``UserWarning``: epochs with too few sources, a missing
+    correction) printed as ``warning: ...`` lines, like the run's other notices, instead of
+    Python's ``file:line: UserWarning`` with a line of source code; others as Python prints
+    them."""
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, UserWarning) and not issubclass(category, DeprecationWarning):
+            _warn(str(message))
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = shown
 
 
 TRUST_HELP = ("use local data files (OARAIM_DATA folder, ../shared/data) even where their "
@@ -101,12 +124,11 @@ def run(
     _trust(trust_data)
 
     try:
-        summary, sdir, figures, wall = run_study(study, realizations=realizations, seed=seed,
-                                                 out=out_dir, sets=set_, quick=quick,
-                                                 show_progress=progress, resume=resume,
-                                                 execution=Execution(workers=workers,
-                                                                     scheduler=scheduler),
-                                                 notice=_warn)
+        with _warnings_as_lines():
+            summary, sdir, figures, wall = run_study(
+                study, realizations=realizations, seed=seed, out=out_dir, sets=set_,
+                quick=quick, show_progress=progress, resume=resume,
+                execution=Execution(workers=workers, scheduler=scheduler), notice=_warn)
     except (ValueError, OSError) as e:  # bad input, unusable --out, a full disk: one line
         _fail(str(e))
     _print_rows(summary)

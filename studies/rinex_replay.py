@@ -357,6 +357,9 @@ class RinexReplay(Study):
         "val_m": Param(35.0, positive, "vertical alert limit of the Stanford diagram and the "
                        "availability share (LPV-200: 35 m)", "m"),
         "fault_modes": fault_modes_param("add-v4.2", "a GNSS receiver follows the current ADD"),
+        "allow_gaps": Param("no", parse_choice("no", "yes"), "yes: replay the epochs the "
+                            "navigation file does not cover (no usable orbits there) instead "
+                            "of refusing it"),
         "bad_epochs": Param("error", parse_choice("error", "skip"),
                             "a malformed, truncated or duplicated epoch of the observation file: "
                             "'error' stops with its file and line, 'skip' leaves it out and "
@@ -373,6 +376,7 @@ class RinexReplay(Study):
         obs = rinex_obs.read_observations(obs_path, max_epochs=int(realizations),
                                           lenient=params["bad_epochs"] == "skip")
         eph = geometry.load_navigation(nav_path, systems=("G",))
+        check_coverage(eph, obs.t_gps_s, nav_path, params["allow_gaps"] == "yes")
         extras = rinex_obs.navigation_extras(nav_path)
         if params["truth"] == "header":
             if obs.approx_position_m is None:
@@ -393,6 +397,12 @@ class RinexReplay(Study):
                                    REPLAY_BUDGETS[params["budget"]],
                                    fault_modes=params["fault_modes"])
         out = replay_blocks(inp, truth, params, max_order, progress)
+        few = np.flatnonzero(out["mhss_status"] == araim.Status.TOO_FEW_SOURCES)
+        if few.size:
+            when = ", ".join(str(gpstime.to_datetime64(obs.t_gps_s[i]))[11:19] for i in few[:3])
+            warnings.warn(f"{few.size} of {n_t} epochs had too few satellites for the MHSS "
+                          f"solution (3 + one clock + 1), e.g. at {when} GPS time; no PL there "
+                          "(epochs_too_few_sources in the summary)", stacklevel=2)
         return self._result(params, obs, nav_path, truth, truth_src, inp, out, max_order)
 
     def _result(self, params, obs, nav_path, truth, truth_src, inp, out, max_order):
@@ -527,6 +537,24 @@ class RinexReplay(Study):
         return paths
 
 
+def check_coverage(ephemeris, t_gps_s, nav_path, allow_gaps=False):
+    """Refuse, in one line, a navigation file that does not cover the observation epochs
+    (``geometry.ephemeris_gaps``: a file of another day, or cut short), unless
+    ``allow_gaps``."""
+    if not np.size(t_gps_s):
+        return
+    _, usable, _, cons, _, _ = geometry.satellites(ephemeris, t_gps_s, ("gps",))
+    gaps = geometry.ephemeris_gaps(usable, cons)
+    if gaps.any() and not allow_gaps:
+        bad = np.flatnonzero(gaps)
+        first = str(gpstime.to_datetime64(np.asarray(t_gps_s)[bad[0]]))[:19]
+        raise ValueError(f"{Path(nav_path).name}: no usable GPS orbits for most satellites at "
+                         f"{bad.size} of {np.size(t_gps_s)} observation epochs (from {first} "
+                         "GPS time); the navigation file is of another day or cut short: give "
+                         "the day's file with --set nav=FILE, or --set allow_gaps=yes to "
+                         "replay what it covers")
+
+
 def metrics(out, params):
     """Summary numbers (``araim.snapshot.replay_metrics`` definitions) from the stored arrays:
     medians/maxima over finite values, MI = HPE > HPL with both finite."""
@@ -546,7 +574,9 @@ def metrics(out, params):
          "hpe_median_m": med(hpe), "hpe_max_m": mx(hpe),
          "hpe_95_m": float(np.percentile(hpe[np.isfinite(hpe)], 95))
          if np.isfinite(hpe).any() else float("inf"),
-         "vpe_median_m": med(out["vpe_m"]), "vpe_max_m": mx(out["vpe_m"])}
+         "vpe_median_m": med(out["vpe_m"]), "vpe_max_m": mx(out["vpe_m"]),
+         "epochs_too_few_sources": int(np.sum(out["mhss_status"]
+                                              == araim.Status.TOO_FEW_SOURCES))}
     for kind in ("mhss", "slope"):
         hpl, vpl = out[f"hpl_{kind}_m"], out[f"vpl_{kind}_m"]
         he, ve = out[f"hpe_{kind}_m"], out[f"vpe_{kind}_m"]

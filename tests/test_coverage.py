@@ -5,6 +5,8 @@ A RINEX 2 file cut at a record boundary has a valid layout and loads without a w
 availability map then reported 18.75 % availability with epochs of no satellite. The check
 (``geometry.ephemeris_gaps``, tests/test_epoch.py by hand) is wired into the map's skies."""
 
+import json
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -57,7 +59,8 @@ def test_almanacs_and_nominal_orbits_have_no_gaps():
 
 def test_cli_map_allow_gaps_maps_what_the_file_has(tmp_path, shared_data):
     """``--set allow_gaps=yes``: the run completes, the epochs past the file's end have no
-    satellite and are unavailable (status TOO_FEW_SOURCES), the covered ones are not."""
+    satellite and are unavailable (status TOO_FEW_SOURCES), counted in the summary and named
+    in a warning."""
     import xarray as xr
 
     cut = _cut(shared_data, tmp_path)
@@ -66,7 +69,27 @@ def test_cli_map_allow_gaps_maps_what_the_file_has(tmp_path, shared_data):
                                  "--set", f"gps={cut}", "--set", "galileo=none",
                                  "--set", "step_s=3600", "--set", "allow_gaps=yes"])
     assert r.exit_code == 0, r.output
+    # the epochs without a solution are counted and named in one warning line, not a raw
+    # Python warning with a line of source code
+    warn = [x for x in r.output.splitlines() if "too few sources" in x]
+    assert len(warn) == 1 and warn[0].startswith("warning: "), r.output
+    assert "UserWarning" not in r.output and "warnings.warn" not in r.output
+    summary = json.loads((tmp_path / "out" / "availability-map" / "summary.json").read_text())
+    assert summary["metrics"]["epochs_too_few_sources"] > 0
     ds = xr.open_zarr(tmp_path / "out" / "availability-map" / "data.zarr", consolidated=False)
     n = ds["n_gnss"].values.ravel()
     assert n.min() == 0 and n.max() >= 6
     assert not ds["available"].values.ravel()[n == 0].any()
+
+
+def test_rinex_replay_refuses_a_navigation_file_of_another_day(tmp_path, shared_data):
+    """The 2005 station hour with the 2022 broadcast file: no orbit covers the epochs; one
+    line, exit 2, naming the file and what to do (it used to end with no epoch solved)."""
+    obs = shared_data / "obs/07590920.05o"
+    r = CliRunner().invoke(app, ["run", "rinex-replay", "--out", str(tmp_path / "out"),
+                                 "--no-progress", "--set", f"obs={obs}",
+                                 "--set", f"nav={shared_data / 'nav/brdc0010.22n'}"])
+    assert r.exit_code == 2, r.output
+    lines = [x for x in r.output.splitlines() if x.strip()]
+    assert len(lines) == 1 and "brdc0010.22n: no usable GPS orbits" in lines[0], r.output
+    assert "--set nav=FILE" in lines[0]

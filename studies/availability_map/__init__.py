@@ -26,6 +26,7 @@ Conventions (MAAST / ADD defaults; each is a parameter): see ``MAAST_DEFAULTS``.
 
 import functools
 import json
+import warnings
 from pathlib import Path
 
 import jax
@@ -41,6 +42,7 @@ from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_varia
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.araim.position_opt import PositionOptimization
+from oaraim.araim.status import Status
 from oaraim.geometry.ephemeris import GALILEO, GPS
 from oaraim.geometry.sky import azimuth, elevation, line_of_sight
 from oaraim.mc.sweep import Values
@@ -550,6 +552,7 @@ class AvailabilityMap(SweepStudy):
                 cube["sigma_acc_m"][1] > req.sigma_acc_v_m)),
             "vpl_median_m": float(np.median(fin(cube["vpl_m"][1]))) if ok.any() else None,
             "hpl_median_m": float(np.median(fin(cube["hpl_m"][1]))) if ok.any() else None,
+            "epochs_too_few_sources": int(np.sum(status == Status.TOO_FEW_SOURCES)),
             "gnss_in_view_min_mean_max": [int(cube["n_gnss"][1].min()),
                                           round(float(cube["n_gnss"][1].mean()), 3),
                                           int(cube["n_gnss"][1].max())],
@@ -567,6 +570,14 @@ class AvailabilityMap(SweepStudy):
                                for k, v in req._asdict().items()},
             "sky_source": sky_desc,
         }
+        few = np.argwhere(status == Status.TOO_FEW_SOURCES)
+        if few.size:
+            where = ", ".join(f"({lats[i]:g}, {lons[j]:g}) at {t[k]:g} s" for i, j, k in few[:3])
+            warnings.warn(f"{few.shape[0]:,} of {status.size:,} user epochs "
+                          f"({100.0 * few.shape[0] / status.size:.3g} %) had too few sources for "
+                          f"a solution (3 + one clock per constellation + 1), e.g. {where}; they "
+                          "count as unavailable (epochs_too_few_sources in the summary)",
+                          stacklevel=2)
         rows = [{"quantity": f"coverage: area with availability >= {100 * lay['target']:g} "
                  f"% ({lay['level'].name})", "unit": "%", "published": None,
                  "reproduced": metrics["coverage_pct"],
