@@ -91,7 +91,7 @@ def plot_uav(out_dir):
     hal = float(a["hal_m"])
     ncol = min(3, len(sel))
     nrow = -(-len(sel) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.2 * nrow), squeeze=False,
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 5.0 * nrow + 0.3), squeeze=False,
                              layout="constrained")
     for ax, i in zip(axes.ravel(), sel, strict=False):
         lo, hi = ds["mi_ci_low"].values[i], ds["mi_ci_high"].values[i]
