@@ -511,6 +511,7 @@ class IntegrityRisk(SweepStudy):
             for j, (d, word) in enumerate((("h", "horizontal"), ("v", "vertical"))):
                 ax = axes[j, ci]
                 sub = ds.isel(n_sops=ci, geometry=g0)
+                shown = False  # anything above the axis floor (1e-30)?
                 for s in range(ds.sizes["scenario"]):
                     kind = int(sub["kind"].values[s, 0])
                     if kind < 0 or not bool(sub[f"active_{d}"].values[s, 0]):
@@ -524,16 +525,19 @@ class IntegrityRisk(SweepStudy):
                     mon = bool(sub[f"monitored_{d}"].values[s, 0])
                     if kind == ir.FAULT_FREE:
                         ax.axhline(max(float(p[0]), 1e-300), color="k", lw=1.2, ls=":")
+                        shown |= float(p[0]) >= 1e-30
                         continue
                     ax.plot(a, np.where(p > 0, p, np.nan), "-" if mon else "--", color=col,
                             lw=0.9, alpha=0.8)
+                    shown |= bool(np.any(p >= 1e-30))
                 ax.axhline(float(ds["allocated"].values[ci, g0, j]), color="0.3", ls="-.",
                            lw=1)
-                if not ax.lines[:-1]:  # nothing drawn: every P(HMI) underflows
+                if not shown:  # nothing above the axis floor: say so, not an empty panel
                     pl = float(sub[f"{d}pl_m"].values[0, 0])
                     ax.text(0.5, 0.5, f"{word[0].upper()}PL {pl:,.0f} m: P(HMI | fault) below "
-                            "1e-300\nfor every scenario and magnitude", ha="center",
-                            transform=ax.transAxes, fontsize=8)
+                            "1e-30 (the axis floor)\nfor every scenario and magnitude",
+                            ha="center", transform=ax.transAxes, fontsize=8)
+                    ax.set_xticks([])  # no curve: a magnitude scale would mean nothing
                 ax.set_yscale("log")
                 ax.set_ylim(1e-30, 2.0)
                 ax.set_xlabel("fault magnitude |f| (m)")
@@ -587,6 +591,9 @@ class IntegrityRisk(SweepStudy):
                             "is far above any error)", ha="center", transform=ax.transAxes,
                             fontsize=8)
                 ax.set_yscale("log")
+                if not np.any(ds["ramp_p_md"].values[ci, :, j] > 0):
+                    ax.set_xlim(float(t.min()), float(t.max()))
+                    ax.set_ylim(1e-300, 1.0)  # no curve: the scale only frames the note
                 ax.set_xlabel("time since the ramp started (s)")
                 ax.set_ylabel(f"P(HMI {'horizontal' if j == 0 else 'vertical'}) per epoch")
                 ax.grid(alpha=0.3)
