@@ -88,6 +88,10 @@ class MonitorReplay(NamedTuple):
     """(T,) its vertical position error |u|, m (inf where it failed)."""
     status: jax.Array
     """(T,) int8 ``Status`` of the kept PLs."""
+    emt_m: jax.Array | None = None
+    """(T,) MHSS only: effective monitor threshold of the kept solution, m (inf where none)."""
+    sigma_acc_u_m: jax.Array | None = None
+    """(T,) MHSS only: vertical accuracy sigma of the kept solution, m (inf where none)."""
 
 
 class ReplayResult(NamedTuple):
@@ -447,7 +451,8 @@ def _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat
         fde.detected & used_epoch, sep_tau, fde.excluded & used,
         jnp.where(ok_fde, fde.pl.hpl_m, jnp.inf), jnp.where(ok_fde, fde.pl.vpl_m, jnp.inf),
         pos, m_err, m_hpe, m_vpe,
-        jnp.where(used_epoch, fde.pl.status, sol.status).astype(jnp.int8))
+        jnp.where(used_epoch, fde.pl.status, sol.status).astype(jnp.int8),
+        jnp.where(ok_fde, fde.pl.emt_m, jnp.inf), jnp.where(ok_fde, fde.pl.sigma_acc_u_m, jnp.inf))
     return mhss
 
 

@@ -34,6 +34,10 @@ Choices (none of them tuned on the results):
 * HAL 40 m and VAL 35 m (LPV-200; ``--set hal_m=``, ``val_m=``) for the horizontal and
   vertical Stanford diagrams (log axes, the regions of the WAAS / EGNOS reports shaded and
   counted: ``studies.common.stanford``) and the availability shares.
+* ``--set signals=auto`` (default): where the observation file has ionosphere-free code pairs
+  (RINEX 3: GPS L1/L5 or L1/L2, Galileo E1/E5a) the dual-frequency GPS + Galileo ARAIM user of
+  ``studies.common.dual_replay`` replaces the L1 user above (one clock per constellation, ISM
+  per constellation; docs/replay.md); ``dual`` insists, ``gps-l1`` keeps the L1 user.
 * A navigation header without Klobuchar coefficients: no ionospheric correction is applied (a
   warning; ``iono_model`` in the summary says so) and sigma_iono bounds the whole delay
   (F_pp tau_vert); ``--set iono=none`` does the same on purpose.
@@ -64,6 +68,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
+from oaraim.studies.common import dual_replay
 from oaraim.studies.common.seed004 import B_NOM_GPS, P_CONST_GPS_PARAM, P_SAT_GPS
 from oaraim.studies.common.stanford import draw_stanford, stanford_counts
 
@@ -250,6 +255,10 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
         a, order.reshape(order.shape + (1,) * (a.ndim - 2)), 1)
     c = {k: take(inp[k]) for k in ("pseudorange_m", "correction_m", "tx_pos_m", "var_int_m2",
                                    "var_acc_m2")}
+    for k, default in (("constellation", 0), ("p_sat", params["p_sat"]),
+                       ("b_nom_m", params["b_nom_m"])):
+        c[k] = take(inp[k] if k in inp else np.full(valid.shape, default))
+    p_const = inp.get("p_const", (params["p_const"],))
     c["var_int_m2"] = np.where(v_c, c["var_int_m2"], 1.0)
     c["var_acc_m2"] = np.where(v_c, c["var_acc_m2"], 1.0)
     x0 = inp["x_ecef_m"]
@@ -257,7 +266,7 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
     per_epoch = ("hpe_m", "vpe_m", "hpl_slope_m", "vpl_slope_m", "hpl_slope_aiv_m",
                  "vpl_slope_aiv_m", "hpe_slope_m", "vpe_slope_m", "hpl_mhss_m", "vpl_mhss_m",
                  "hpl_mhss_aiv_m", "vpl_mhss_aiv_m", "hpe_mhss_m", "vpe_mhss_m",
-                 "slope_statistic", "mhss_max_tau")
+                 "slope_statistic", "mhss_max_tau", "emt_mhss_m", "sigma_acc_mhss_m")
     ints = ("wnls_status", "slope_status", "mhss_status", "slope_detected", "mhss_detected",
             "n_used")
     for k in per_epoch:
@@ -275,7 +284,8 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
         r = snapshot.replay(
             c["pseudorange_m"][idx], c["tx_pos_m"][idx], c["var_int_m2"][idx],
             c["var_acc_m2"][idx], v_c[idx], truth, correction_m=c["correction_m"][idx],
-            p_const=(params["p_const"],), p_sat=params["p_sat"], b_nom_m=params["b_nom_m"],
+            constellation=c["constellation"][idx], p_const=p_const, p_sat=c["p_sat"][idx],
+            b_nom_m=c["b_nom_m"][idx],
             x0_m=x0[idx], config=snapshot.ReplayConfig(
                 budget=REPLAY_BUDGETS[params["budget"]], p_fa=params["p_fa"], p_md=params["p_md"],
                 max_order=max_order, fault_modes=params["fault_modes"]))
@@ -290,6 +300,7 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
             "vpl_mhss_aiv_m": r.mhss.vpl_all_in_view_m, "hpe_mhss_m": r.mhss.hpe_m,
             "vpe_mhss_m": r.mhss.vpe_m, "slope_statistic": r.slope.statistic,
             "mhss_max_tau": r.mhss.statistic, "wnls_status": r.wnls.status,
+            "emt_mhss_m": r.mhss.emt_m, "sigma_acc_mhss_m": r.mhss.sigma_acc_u_m,
             "slope_status": r.slope.status, "mhss_status": r.mhss.status,
             "slope_detected": r.slope.detected, "mhss_detected": r.mhss.detected,
             "n_used": np.sum(np.asarray(r.used), -1), "error_enu_m": r.error_enu_m,
@@ -346,6 +357,16 @@ class RinexReplay(Study):
         "b_nom_m": B_NOM_GPS,
         "p_sat": P_SAT_GPS,
         "p_const": P_CONST_GPS_PARAM,
+        "signals": Param("auto", parse_choice("auto", "dual", "gps-l1"), "auto: dual-frequency "
+                         "GPS + Galileo (ionosphere-free) where the observation file has it, "
+                         "else GPS L1 single frequency; dual; gps-l1"),
+        "gps_pair": Param("l1l5", parse_choice("l1l5", "l1l2"), "dual: GPS L1/L5 where "
+                          "observed, else L1/L2 (C1C/C2W); l1l2: GPS L1/L2 only"),
+        "airborne_model": Param("add", parse_choice("add", "ed259a"), "dual: airborne noise "
+                                "and multipath, the ADD's (times the iono-free factor) or "
+                                "ED-259A's"),
+        "galileo_ism": Param(dual_replay.ISM_GALILEO_TEXT, dual_replay.parse_ism, "dual: "
+                             "Galileo ISM sigma_URA,b_nom,P_sat,P_const (ADD defaults)"),
         "iono": Param("klobuchar", parse_choice("klobuchar", "none"), "ionospheric correction"),
         "tropo": Param("mops", parse_choice("mops", "none"),
                        "tropospheric correction (RTCA DO-229 A.4.2.4)"),
@@ -387,13 +408,29 @@ class RinexReplay(Study):
         else:
             truth = np.asarray(params["truth"], np.float64)
             truth_src = "--set truth"
-        inp = gnss_replay_inputs(obs, eph, extras, mask_deg=params["mask_deg"],
-                                 sigma_ura_m=params["sigma_ura_m"], iono=params["iono"],
-                                 tropo=params["tropo"])
+        table = dual_replay.dual_table(obs_path, obs, params["signals"],
+                                       params["bad_epochs"] == "skip")
+        if table is not None:
+            gps = araim.Ism(params["sigma_ura_m"], None, params["b_nom_m"], params["p_sat"],
+                            params["p_const"])
+            inp = dual_replay.dual_inputs(table, nav_path, mask_deg=params["mask_deg"],
+                                          isms=(gps, dual_replay.parse_ism(
+                                              "galileo_ism", params["galileo_ism"])),
+                                          airborne_model=params["airborne_model"],
+                                          gps_pair=params["gps_pair"], tropo=params["tropo"])
+            obs = obs._replace(sv=inp["sv"])
+        else:
+            inp = gnss_replay_inputs(obs, eph, extras, mask_deg=params["mask_deg"],
+                                     sigma_ura_m=params["sigma_ura_m"], iono=params["iono"],
+                                     tropo=params["tropo"])
         n_t = obs.t_gps_s.size
-        p_sat = np.full(inp["valid"].shape, params["p_sat"])
-        max_order = required_order(inp["valid"], np.zeros(inp["valid"].shape, np.int32), p_sat,
-                                   np.full((n_t, 1), params["p_const"]),
+        p_sat = inp.get("p_sat", np.full(inp["valid"].shape, params["p_sat"]))
+        cons = inp.get("constellation", np.zeros(inp["valid"].shape, np.int32))
+        p_const = np.asarray(inp.get("p_const", (params["p_const"],)), np.float64)
+        order, v_c = compact(inp["valid"], max(int(inp["valid"].sum(-1).max()), 1))
+        cons, p_sat = (np.take_along_axis(a, order, -1) for a in (cons, p_sat))
+        max_order = required_order(v_c, cons, p_sat,
+                                   np.broadcast_to(p_const, (n_t, p_const.size)),
                                    REPLAY_BUDGETS[params["budget"]],
                                    fault_modes=params["fault_modes"])
         out = replay_blocks(inp, truth, params, max_order, progress)
@@ -414,6 +451,7 @@ class RinexReplay(Study):
         ep = ("epoch",)
         es = ("epoch", "sv")
         m = metrics(out, params)
+        m.update(dual_replay.summary_extras(inp, out, obs.sv))
         ds = xr.Dataset(
             {k: (ep, out[k]) for k in out if out[k].ndim == 1}
             | {"error_e_m": (ep, out["error_enu_m"][:, 0]),
@@ -431,9 +469,10 @@ class RinexReplay(Study):
                "sat_clock_m": (es, inp["sat_clock_m"]), "tgd_m": (es, inp["tgd_m"]),
                "ephemeris_age_s": (es, inp["ephemeris_age_s"]),
                "sigma_int_m": (es, np.sqrt(inp["var_int_m2"])),
-               "t_gps_s": (ep, t), "hours": (ep, hours)},
+               "t_gps_s": (ep, t), "hours": (ep, hours)}
+            | dual_replay.dataset_extras(inp, out),
             # GPS PRN numbers (a string coordinate has no stable Zarr v3 encoding)
-            coords={"epoch": np.arange(n_t), "sv": np.array([int(v[1:]) for v in obs.sv])},
+            coords={"epoch": np.arange(n_t), "sv": dual_replay.sv_numbers(obs.sv)},
             attrs={"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
                    "code": obs.code, "marker": obs.marker, "truth_ecef_m": list(truth),
                    "truth_source": truth_src, "truth_lat_lon_h": [lat, lon, h],
@@ -442,7 +481,9 @@ class RinexReplay(Study):
                    "budget": BUDGET_NAMES[params["budget"]],
                    "stanford_counts": json.dumps(m["stanford"]),
                    "val_m": params["val_m"], "mask_deg": params["mask_deg"],
-                   "mhss_max_order": int(max_order), "sv_names": ",".join(obs.sv)})
+                   "mhss_max_order": int(max_order), "sv_names": ",".join(obs.sv),
+                   "combination": m["combination"],
+                   "constellations": ",".join(m["constellations"])})
         m.update({"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
                   "code": obs.code, "truth_source": truth_src, "truth_ecef_m": list(truth),
                   "iono_model": inp["iono_model"], "mhss_max_order": int(max_order),
@@ -476,9 +517,10 @@ class RinexReplay(Study):
             "fault_modes": params["fault_modes"], "budget": params["budget"]})
 
     def plot(self, out_dir):
-        """hpe_hpl_time.png (errors and protection levels over the day) and
+        """hpe_hpl_time.png (errors and protection levels over the day),
         stanford_diagram.png (horizontal and vertical, MHSS and slope RAIM: log axes, the
-        regions shaded and labelled with the counts the run stored)."""
+        regions shaded and labelled with the counts the run stored) and satellites_used.png
+        (per constellation)."""
         import matplotlib.pyplot as plt
 
         ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
@@ -534,6 +576,7 @@ class RinexReplay(Study):
         fig.savefig(p, dpi=110)
         plt.close(fig)
         paths.append(p)
+        paths.append(dual_replay.draw_satellites_used(ds, out_dir))
         return paths
 
 

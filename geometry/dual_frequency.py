@@ -1,0 +1,94 @@
+"""Ionosphere-free code pseudoranges of a dual-frequency GPS + Galileo receiver.
+
+``iono_free(table)`` forms, per satellite and epoch, the first pair of ``PAIRS`` its system
+offers (RINEX 3 observation codes of ``geometry.rinex_obs.read_observation_table``):
+
+* GPS L1/L5: C1C with C5Q, C5X or C5I (the ARAIM default, ADD);
+* GPS L1/L2: C1C with C2W, the fallback where a GPS satellite has no L5 (in 2023-2024 only
+  the Block IIF and III satellites transmit it);
+* Galileo E1/E5a: C1C, C1X or C1B with C5Q, C5X or C5I.
+
+P_IF = (f1^2 P1 - f2^2 P2) / (f1^2 - f2^2) removes the first-order ionospheric delay; its
+noise is that of one code times ``factor`` = sqrt(f1^4 + f2^4) / (f1^2 - f2^2) for independent
+equal noises (2.98 L1/L2, 2.59 L1/L5 and E1/E5a; ``araim.error_models.iono_free_factor``).
+
+Group delays (what the broadcast clocks refer to, and what is not corrected here):
+
+* The GPS LNAV clock refers to the L1 P(Y) / L2 P(Y) ionosphere-free combination
+  (IS-GPS-200 20.3.3.3.3.2): C1W/C2W ionosphere-free needs no T_GD. The user combines the
+  civil C1C with C2W: C1C - C1W (the P1-C1 differential code bias, DCB, up to about 1 ns)
+  enters times f1^2 / (f1^2 - f2^2) = 2.55. The DCB is not in the navigation or observation
+  files and is left uncorrected; the nominal bias b_nom of the ISM bounds it (0.75 m).
+* The GPS L1/L5 combination needs the inter-signal corrections ISC_L1C, ISC_L5I5/Q5 of the
+  CNAV message (IS-GPS-705 20.3.3.3.1.2); a RINEX 3 LNAV record carries none: left
+  uncorrected (decimetres), also under b_nom.
+* The Galileo F/NAV clock refers to the E1/E5a ionosphere-free combination (OS SIS ICD
+  5.1.3): no BGD for E1/E5a (load the orbits with ``galileo_source="fnav"``).
+* Receiver biases common to a constellation's satellites go into its clock; the difference
+  between a GPS satellite on L1/L5 and one on L1/L2 (the receiver's C2W - C5 bias, times the
+  factors) does not, and is a second reason to prefer one pair per constellation: ``PAIRS``
+  order and ``gps_pair`` (``"l1l5"`` L1/L5 first, ``"l1l2"`` L1/L2 only).
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from oaraim.constants import F_E1_HZ, F_E5A_HZ
+
+#: carrier frequencies, Hz (IS-GPS-200 3.3.1.1, IS-GPS-705 3.3.1.1; Galileo OS SIS ICD 2.3)
+F_L1_HZ, F_L2_HZ, F_L5_HZ = 1575.42e6, 1227.60e6, 1176.45e6
+
+#: combination codes (``IonoFree.combination``): 0 none
+NONE, GPS_L1L5, GPS_L1L2, GAL_E1E5A = 0, 1, 2, 3
+COMBINATION_NAMES = {GPS_L1L5: "GPS L1/L5", GPS_L1L2: "GPS L1/L2", GAL_E1E5A: "Galileo E1/E5a"}
+#: (combination, system letter, codes of f1 by preference, codes of f2, f1, f2)
+PAIRS = (
+    (GPS_L1L5, "G", ("C1C",), ("C5Q", "C5X", "C5I"), F_L1_HZ, F_L5_HZ),
+    (GPS_L1L2, "G", ("C1C",), ("C2W",), F_L1_HZ, F_L2_HZ),
+    (GAL_E1E5A, "E", ("C1C", "C1X", "C1B"), ("C5Q", "C5X", "C5I"), F_E1_HZ, F_E5A_HZ),
+)
+
+
+def factor(f1_hz, f2_hz):
+    """Noise amplification of the ionosphere-free combination of two equal, independent code
+    noises: sqrt(f1^4 + f2^4) / (f1^2 - f2^2)."""
+    return float(np.sqrt(f1_hz**4 + f2_hz**4) / (f1_hz**2 - f2_hz**2))
+
+
+class IonoFree(NamedTuple):
+    """Ionosphere-free pseudoranges of an observation table (T epochs, S satellites)."""
+
+    pseudorange_m: np.ndarray
+    """(T, S) P_IF, metres (NaN where no pair)."""
+    combination: np.ndarray
+    """(T, S) int8: the pair used (``GPS_L1L5``, ``GPS_L1L2``, ``GAL_E1E5A``), 0 none."""
+    noise_factor: np.ndarray
+    """(T, S) ``factor`` of that pair (1 where none)."""
+
+
+def iono_free(table, gps_pair="l1l5") -> IonoFree:
+    """Per satellite and epoch, the first pair of ``PAIRS`` observed (module docstring);
+    ``gps_pair="l1l2"``: GPS on L1/L2 only."""
+    if gps_pair not in ("l1l5", "l1l2"):
+        raise ValueError(f"gps_pair must be 'l1l5' or 'l1l2', got {gps_pair!r}")
+    n_t, n_s = table.t_gps_s.size, table.sv.size
+    pr = np.full((n_t, n_s), np.nan)
+    comb = np.zeros((n_t, n_s), np.int8)
+    fac = np.ones((n_t, n_s))
+    system = np.array([s[0] for s in table.sv])
+    for code, sysch, c1, c2, f1, f2 in PAIRS:
+        if code == GPS_L1L5 and gps_pair == "l1l2":
+            continue
+        cols = system == sysch
+        if not cols.any():
+            continue
+        p1, _ = table.pick(c1)
+        p2, _ = table.pick(c2)
+        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
+        val = g1 * p1 - g2 * p2
+        fill = cols[None, :] & (comb == NONE) & np.isfinite(val) & (p1 > 0) & (p2 > 0)
+        pr[fill] = val[fill]
+        comb[fill] = code
+        fac[fill] = factor(f1, f2)
+    return IonoFree(pr, comb, fac)
