@@ -59,3 +59,30 @@ def test_dual_frequency_replay_by_default(shared_data, files, pinned):
     assert set(np.unique(comb)) <= {0, dfq.GPS_L1L5, dfq.GPS_L1L2, dfq.GAL_E1E5A}
     for k, v in (pinned or {}).items():
         assert m[k] == pytest.approx(v, rel=1e-2, abs=0.01), k
+
+
+def test_airborne_models_scale_with_the_pair():
+    """ADD: the L1 curves times the pair's factor; ED-259A: its own curve, times 2.98 / 2.59
+    for L1/L2 only."""
+    el = np.deg2rad(np.array([5.0, 30.0, 90.0]))
+    f15 = dfq.factor(dfq.F_L1_HZ, dfq.F_L5_HZ)
+    f12 = dfq.factor(dfq.F_L1_HZ, dfq.F_L2_HZ)
+    add15 = dual_replay.user_sigma_m(el, np.full(3, f15))
+    np.testing.assert_allclose(add15, araim.error_models.sigma_user_airborne_m(el), rtol=1e-12)
+    np.testing.assert_allclose(dual_replay.user_sigma_m(el, np.full(3, f12)), add15 * f12 / f15)
+    ed = dual_replay.user_sigma_m(el, np.full(3, f15), "ed259a")
+    np.testing.assert_allclose(ed, araim.error_models.sigma_user_ed259a_m(el), rtol=1e-12)
+    np.testing.assert_allclose(dual_replay.user_sigma_m(el, np.full(3, f12), "ed259a"),
+                               ed * f12 / f15)
+
+
+def test_dual_on_a_single_frequency_file_is_one_line(shared_data):
+    """signals=dual on the 2005 RINEX 2 file (C1, P2: no RINEX 3 pair) names the fix; auto
+    keeps the GPS L1 user there (its numbers: tests/test_rinex_replay.py)."""
+    obs = shared_data / "obs" / "07590920.05o"
+    study = STUDIES["rinex-replay"]
+    params = study.validate({"obs": str(obs), "nav": str(obs.with_suffix(".05n")),
+                             "signals": "dual"})
+    with pytest.raises(ValueError, match="07590920.05o: no dual-frequency code pair.*"
+                                         "signals=gps-l1"):
+        study.run(params, 10, 0, None)
