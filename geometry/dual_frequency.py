@@ -39,9 +39,12 @@ from oaraim.constants import F_E1_HZ, F_E5A_HZ
 #: carrier frequencies, Hz (IS-GPS-200 3.3.1.1, IS-GPS-705 3.3.1.1; Galileo OS SIS ICD 2.3)
 F_L1_HZ, F_L2_HZ, F_L5_HZ = 1575.42e6, 1227.60e6, 1176.45e6
 
-#: combination codes (``IonoFree.combination``): 0 none
-NONE, GPS_L1L5, GPS_L1L2, GAL_E1E5A = 0, 1, 2, 3
-COMBINATION_NAMES = {GPS_L1L5: "GPS L1/L5", GPS_L1L2: "GPS L1/L2", GAL_E1E5A: "Galileo E1/E5a"}
+#: combination codes (``IonoFree.combination``): 0 none; single frequency 4 GPS L1, 5 E1
+NONE, GPS_L1L5, GPS_L1L2, GAL_E1E5A, GPS_L1, GAL_E1 = 0, 1, 2, 3, 4, 5
+COMBINATION_NAMES = {GPS_L1L5: "GPS L1/L5", GPS_L1L2: "GPS L1/L2", GAL_E1E5A: "Galileo E1/E5a",
+                     GPS_L1: "GPS L1", GAL_E1: "Galileo E1"}
+#: single-frequency codes by preference: (combination, system letter, codes)
+SINGLE = ((GPS_L1, "G", ("C1C",)), (GAL_E1, "E", ("C1C", "C1X", "C1B")))
 #: (combination, system letter, codes of f1 by preference, codes of f2, f1, f2)
 PAIRS = (
     (GPS_L1L5, "G", ("C1C",), ("C5Q", "C5X", "C5I"), F_L1_HZ, F_L5_HZ),
@@ -92,3 +95,19 @@ def iono_free(table, gps_pair="l1l5") -> IonoFree:
         comb[fill] = code
         fac[fill] = factor(f1, f2)
     return IonoFree(pr, comb, fac)
+
+
+def single_frequency(table) -> IonoFree:
+    """GPS L1 C/A (C1C) and Galileo E1 (C1C, C1X or C1B) code pseudoranges, per satellite and
+    epoch (``combination`` ``GPS_L1`` / ``GAL_E1``, ``noise_factor`` 1); the ionosphere stays
+    in them."""
+    n_t, n_s = table.t_gps_s.size, table.sv.size
+    pr = np.full((n_t, n_s), np.nan)
+    comb = np.zeros((n_t, n_s), np.int8)
+    system = np.array([s[0] for s in table.sv])
+    for code, sysch, codes in SINGLE:
+        p, _ = table.pick(codes)
+        fill = (system == sysch)[None, :] & np.isfinite(p) & (p > 0)
+        pr[fill] = p[fill]
+        comb[fill] = code
+    return IonoFree(pr, comb, np.ones((n_t, n_s)))

@@ -357,9 +357,10 @@ class RinexReplay(Study):
         "b_nom_m": B_NOM_GPS,
         "p_sat": P_SAT_GPS,
         "p_const": P_CONST_GPS_PARAM,
-        "signals": Param("auto", parse_choice("auto", "dual", "gps-l1"), "auto: dual-frequency "
-                         "GPS + Galileo (ionosphere-free) where the observation file has it, "
-                         "else GPS L1 single frequency; dual; gps-l1"),
+        "signals": Param("auto", parse_choice("auto", "dual", "gps-l1", "single"), "auto: "
+                         "dual-frequency GPS + Galileo (ionosphere-free) where the observation "
+                         "file has it, else GPS L1; dual; gps-l1; single: GPS L1 + Galileo E1 "
+                         "(T_GD, BGD, Klobuchar on both)"),
         "gps_pair": Param("l1l5", parse_choice("l1l5", "l1l2"), "dual: GPS L1/L5 where "
                           "observed, else L1/L2 (C1C/C2W); l1l2: GPS L1/L2 only"),
         "airborne_model": Param("add", parse_choice("add", "ed259a"), "dual: airborne noise "
@@ -417,7 +418,8 @@ class RinexReplay(Study):
                                           isms=(gps, dual_replay.parse_ism(
                                               "galileo_ism", params["galileo_ism"])),
                                           airborne_model=params["airborne_model"],
-                                          gps_pair=params["gps_pair"], tropo=params["tropo"])
+                                          gps_pair=params["gps_pair"], tropo=params["tropo"],
+                                          single=params["signals"] == "single")
             obs = obs._replace(sv=inp["sv"])
         else:
             inp = gnss_replay_inputs(obs, eph, extras, mask_deg=params["mask_deg"],

@@ -86,3 +86,16 @@ def test_dual_on_a_single_frequency_file_is_one_line(shared_data):
     with pytest.raises(ValueError, match="07590920.05o: no dual-frequency code pair.*"
                                          "signals=gps-l1"):
         study.run(params, 10, 0, None)
+
+
+def test_single_frequency_gps_galileo_option(shared_data):
+    """signals=single on TLSE: GPS L1 (T_GD) + Galileo E1 (I/NAV clock, BGD(E1,E5b)),
+    Klobuchar on both (a stand-in for NeQuick-G, said in iono_model); measured median HPE
+    0.392 m (the GPS L1 user: 0.387 m), HPL 59.6 m (sigma_iono of DO-229), 0 MI."""
+    m = _run(shared_data, TLSE, 120, signals="single").metrics
+    assert m["constellations"] == ["GPS", "Galileo"]
+    assert m["combination"].startswith("single-frequency GPS + Galileo")
+    assert "NeQuick-G (not implemented)" in m["iono_model"]
+    assert m["hpe_median_m"] == pytest.approx(0.392, abs=0.01)
+    assert m["hpl_median_m"] == pytest.approx(59.57, rel=1e-2)
+    assert m["misleading_information_epochs"] == 0

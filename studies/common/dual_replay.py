@@ -26,6 +26,9 @@ from oaraim.constants import C_M_S
 from oaraim.geometry import dual_frequency as dfq
 from oaraim.geometry import rinex_obs
 
+#: ``signals=single``: the ionosphere of the single-frequency user
+SINGLE_NOTE = ("klobuchar (IS-GPS-200) on GPS L1 and, as a stand-in for NeQuick-G (not "
+               "implemented), on Galileo E1; sigma_iono DO-229 J.2.3")
 #: constellations of the dual-frequency user: (system letter, name)
 SYSTEMS = (("G", "GPS"), ("E", "Galileo"))
 #: the ADD's L1/L5 (and E1/E5a) factor, the reference of the ED-259A curve
@@ -63,7 +66,7 @@ def dual_table(obs_path, obs, signals, lenient):
         t_gps_s=table.t_gps_s[keep], values={c: a[keep] for c, a in table.values.items()},
         lli={c: a[keep] for c, a in table.lli.items()}, epoch_line=table.epoch_line[keep],
         epoch_file=table.epoch_file[keep])
-    if has_dual(table):
+    if signals == "single" or has_dual(table):
         return table
     if signals == "dual":
         raise ValueError(f"{obs_path}: no dual-frequency code pair (GPS C1C with C5Q/C5X/C5I "
@@ -88,20 +91,34 @@ def user_sigma_m(el_rad, noise_factor, model="add"):
 
 
 def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM_GALILEO),
-                airborne_model="add", gps_pair="l1l5", tropo="mops", n_passes=3):
+                airborne_model="add", gps_pair="l1l5", tropo="mops", n_passes=3,
+                single=False):
     """Per-epoch inputs of ``araim.snapshot.replay`` for the dual-frequency user (module
     docstring), in the layout of ``studies.rinex_replay.gnss_replay_inputs`` plus
     ``constellation`` (T, S) clock groups, ``p_sat``, ``b_nom_m`` (T, S), ``p_const`` (C,),
-    ``combination`` (T, S) pair codes, ``constellations`` (names) and ``sv`` (S,)."""
+    ``combination`` (T, S) pair codes, ``constellations`` (names) and ``sv`` (S,).
+
+    ``single=True``: the single-frequency GPS L1 + Galileo E1 user instead (``SINGLE_NOTE``)."""
     table = table.select("GE")
     t = table.t_gps_s
     sv = table.sv
-    iof = dfq.iono_free(table, gps_pair)
-    eph = geometry.load_navigation(nav_path, systems=("G", "E"), galileo_source="fnav")
+    iof = dfq.single_frequency(table) if single else dfq.iono_free(table, gps_pair)
+    eph = geometry.load_navigation(nav_path, systems=("G", "E"),
+                                   galileo_source="inav" if single else "fnav")
     pr = np.where(iof.combination > 0, iof.pseudorange_m, 0.0)
     observed = iof.combination > 0
     n_t, n_s = pr.shape
-    sat = rinex_obs.satellites_at_transmit(eph, t, pr, observed, sv, np.zeros((n_t, n_s)))
+    alpha = beta = None
+    gd_s = np.zeros((n_t, n_s))
+    if single:
+        extras = rinex_obs.navigation_extras(nav_path)
+        alpha, beta = extras.alpha, extras.beta
+        for ch, field in (("G", "TGD"), ("E", "BGDe5b")):
+            cols = np.flatnonzero(np.array([s[0] == ch for s in sv])
+                                  & np.isin(sv, eph.prns))
+            if cols.size:
+                gd_s[:, cols] = np.nan_to_num(eph.record_field(field, t, prns=sv[cols]))
+    sat = rinex_obs.satellites_at_transmit(eph, t, pr, observed, sv, gd_s)
     valid = sat.valid
     letters = np.array([s[0] for s in sv])
     present = [k for k, (ch, _) in enumerate(SYSTEMS) if (valid[:, letters == ch]).any()]
@@ -119,7 +136,7 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
     ure = np.array([(i.sigma_ure_m if i.sigma_ure_m is not None
                      else araim.error_models.URE_OVER_URA * i.sigma_ura_m)
                     for i in used_isms])[ism_of]
-    clock_m = C_M_S * sat.clock_s
+    clock_m = C_M_S * (sat.clock_s - sat.tgd_s)
     rot, _ = rinex_obs.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
     sol = araim.wnls(np.where(valid, pr + clock_m, 0.0), np.asarray(rot), 1.0,
                      valid=valid, clock_index=cons, n_clocks=n_clocks)
@@ -127,32 +144,36 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
     mask = np.deg2rad(mask_deg)
 
     def terms(x):
-        rt = rinex_obs.receiver_terms(x, sat.ecef_tx_m, t)
+        rt = rinex_obs.receiver_terms(x, sat.ecef_tx_m, t, alpha, beta)
         el = np.asarray(rt.el_rad)
         tropo_m = np.asarray(rt.tropo_m) if tropo == "mops" else np.zeros_like(el)
         v = valid & (el >= mask)
         common = (np.asarray(sigma_tropo_m(el)) ** 2
-                  + user_sigma_m(el, iof.noise_factor, airborne_model) ** 2)
-        return rt, el, tropo_m, v, ura**2 + common, ure**2 + common
+                  + user_sigma_m(el, iof.noise_factor, "add" if single else airborne_model) ** 2
+                  + (np.asarray(rt.sigma_iono_m) ** 2 if single else 0.0))
+        return rt, el, tropo_m, v, ura**2 + common, ure**2 + common, np.asarray(rt.iono_m)
 
     for _ in range(max(2, n_passes) - 1):
-        rt, el, tropo_m, v, var_int, _ = terms(x)
-        sol = araim.wnls(np.where(v, pr + clock_m - tropo_m, 0.0), np.asarray(rt.sat_ecef_m),
+        rt, el, tropo_m, v, var_int, _, iono_m = terms(x)
+        sol = araim.wnls(np.where(v, pr + clock_m - iono_m - tropo_m, 0.0),
+                         np.asarray(rt.sat_ecef_m),
                          np.sqrt(np.where(v, var_int, 1.0)), x0_m=x, valid=v,
                          clock_index=cons, n_clocks=n_clocks)
         x = np.where(np.isfinite(np.asarray(sol.position_m)), np.asarray(sol.position_m), x)
-    rt, el, tropo_m, v, var_int, var_acc = terms(x)
+    rt, el, tropo_m, v, var_int, var_acc, iono_m = terms(x)
     z = lambda a: np.where(valid, np.asarray(a), 0.0)  # noqa: E731
     p_sat = np.array([i.p_sat for i in used_isms])[ism_of]
     b_nom = np.array([i.b_nom_m for i in used_isms])[ism_of]
     return {
-        "pseudorange_m": pr, "correction_m": z(clock_m - tropo_m),
+        "pseudorange_m": pr, "correction_m": z(clock_m - iono_m - tropo_m),
         "tx_pos_m": np.where(valid[..., None], np.asarray(rt.sat_ecef_m), 0.0),
         "var_int_m2": np.where(v, var_int, 1.0), "var_acc_m2": np.where(v, var_acc, 1.0),
-        "valid": v, "az_rad": z(rt.az_rad), "el_rad": z(el), "iono_m": np.zeros((n_t, n_s)),
-        "tropo_m": z(tropo_m), "sat_clock_m": z(clock_m), "tgd_m": np.zeros((n_t, n_s)),
+        "valid": v, "az_rad": z(rt.az_rad), "el_rad": z(el), "iono_m": z(iono_m),
+        "tropo_m": z(tropo_m), "sat_clock_m": z(C_M_S * sat.clock_s),
+        "tgd_m": z(C_M_S * sat.tgd_s),
         "ephemeris_age_s": z(sat.age_s), "observed": observed, "ephemeris_valid": sat.valid,
-        "x_ecef_m": x, "iono_model": "none (ionosphere-free combinations)",
+        "x_ecef_m": x, "iono_model": (SINGLE_NOTE if single else
+                                      "none (ionosphere-free combinations)"),
         "constellation": np.ascontiguousarray(cons),
         "p_sat": np.broadcast_to(p_sat, (n_t, n_s)).copy(),
         "b_nom_m": np.broadcast_to(b_nom, (n_t, n_s)).copy(),
@@ -167,7 +188,9 @@ def combination_text(comb, constellations):
     n = max(int(np.sum(comb > 0)), 1)
     parts = [f"{dfq.COMBINATION_NAMES[c]} {100 * np.sum(comb == c) / n:.0f} %"
              for c in sorted(dfq.COMBINATION_NAMES) if np.any(comb == c)]
-    return "dual-frequency ionosphere-free " + " + ".join(constellations) + ": " + ", ".join(parts)
+    kind = ("single-frequency " if np.any(comb >= dfq.GPS_L1)
+            else "dual-frequency ionosphere-free ")
+    return kind + " + ".join(constellations) + ": " + ", ".join(parts)
 
 
 #: LPV-200 availability (MAAST's criterion): VPL, HPL, EMT, sigma_acc (vertical) limits, m
