@@ -344,7 +344,7 @@ class RinexReplay(Study):
     params = {
         "obs": Param("auto", parse_path, "RINEX 2/3 observation file ('auto': "
                      f"{DEFAULT_OBS}, fetched if missing: `oaraim data list`)"),
-        "nav": Param("auto", parse_path, "RINEX 2/3 GPS navigation file ('auto': "
+        "nav": Param("auto", parse_path, "RINEX 2/3 navigation file, GPS (+ Galileo) ('auto': "
                      f"{DEFAULT_NAV} with the default obs, else the .yyn beside the obs file)"),
         "truth": Param("header", parse_truth, "true receiver position X,Y,Z (ECEF m) or "
                        "'header' (APPROX POSITION XYZ)", "m"),
