@@ -31,6 +31,7 @@ from oaraim.araim.budget import BUDGET_LPV200, IntegrityBudget
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, fault_mode_rule
 from oaraim.araim.mhss import MHSSResult, protection_levels
+from oaraim.araim.validate import check_range
 from oaraim.geometry import (
     ephemeris_gaps,
     geodetic_to_ecef,
@@ -38,6 +39,7 @@ from oaraim.geometry import (
     look_angles,
     satellites,
 )
+from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair
 
 __all__ = ["ISM_GALILEO", "ISM_GPS", "ISM_SOP", "SOURCE_BUCKETS", "EpochLevels", "Ism",
            "epoch_protection_levels"]
@@ -167,15 +169,9 @@ def epoch_protection_levels(lat_deg, lon_deg, h_m, t_gps_s, sky="nominal",
       ``EpochLevels``. An epoch with too few sources or an unmet budget has infinite PLs and
       its ``Status``, like every receiver function.
     """
-    for name, v, lo, hi in (("lat_deg", lat_deg, -90.0, 90.0), ("lon_deg", lon_deg, -180.0,
-                                                                  360.0),
-                            ("h_m", h_m, -1000.0, 1e5)):
-        try:
-            x = float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a number, got {v!r}") from None
-        if not (lo <= x <= hi):
-            raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {v!r}")
+    lat = check_range("lat_deg", lat_deg, -90.0, 90.0)
+    lon = check_range("lon_deg", lon_deg, -180.0, 360.0)
+    h = check_range("h_m", h_m, -1000.0, 1e5)
     if airborne_model not in AIRBORNE_MODELS:
         raise ValueError(f"airborne_model must be one of {', '.join(AIRBORNE_MODELS)}, got "
                          f"{airborne_model!r}")
@@ -183,13 +179,12 @@ def epoch_protection_levels(lat_deg, lon_deg, h_m, t_gps_s, sky="nominal",
     t = np.atleast_1d(np.asarray(t_gps_s, np.float64))
     if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)):
         raise ValueError("t_gps_s must be a finite number or a 1-D array of GPS seconds")
-    mask = float(mask_deg)
-    if not 0.0 <= mask < 90.0:
-        raise ValueError(f"mask_deg must be in [0, 90), got {mask_deg!r}")
+    mask = check_range("mask_deg", mask_deg, 0.0, 90.0)
+    if mask == 90.0:
+        raise ValueError(f"mask_deg must be below 90 (no sky is left above it), got {mask_deg!r}")
     fault_mode_rule(fault_modes)  # a bad name fails here, before the sky is computed
 
-    rx = np.asarray(geodetic_to_ecef(np.deg2rad(float(lat_deg)), np.deg2rad(float(lon_deg)),
-                                     float(h_m)))
+    rx = np.asarray(geodetic_to_ecef(np.deg2rad(lat), np.deg2rad(lon), h))
     ecef, usable, _, cons, sv, desc = satellites(sky, t, tuple(constellations))
     gaps = ephemeris_gaps(usable, cons)
     if gaps.any() and not allow_gaps:
@@ -208,6 +203,13 @@ def epoch_protection_levels(lat_deg, lon_deg, h_m, t_gps_s, sky="nominal",
         if np.any(np.linalg.norm(tw_ecef - rx, axis=-1) < 1.0):
             raise ValueError("a tower is within 1 m of the receiver: no line of sight; "
                              "check the towers' coordinates")
+        near = first_near_pair(tw_ecef, carriers)
+        if near is not None:
+            a, b, d = near
+            raise ValueError(f"towers rows {a + 1} and {b + 1}: carrier {carriers[b]!r} twice "
+                             f"within {MIN_SEPARATION_M:g} m ({d:.3g} m apart): one transmitter "
+                             "given twice would count as two independent ranges; give one row "
+                             "per transmitter")
         ta, te, _, _ = (np.asarray(x) for x in look_angles(
             rx, tw_ecef[None], np.ones((1, n_tw), bool), -np.pi / 2))
         az = np.concatenate([az, np.broadcast_to(ta, (t.size, n_tw))], -1)

@@ -94,7 +94,10 @@ def test_options_reach_the_levels(vill):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    (dict(lat_deg=100.0), r"lat_deg must be in \[-90, 90\]"),
+    (dict(lat_deg=100.0), r"lat_deg must be a number in \[-90.0, 90.0\], got 100.0"),
+    (dict(mask_deg="low"), r"mask_deg must be a number in \[0.0, 90.0\], got 'low'"),
+    (dict(towers=[(40.44, -4.24, 30.0, "A"), (40.44 + 1e-9, -4.24, 30.0, "A")]),
+     r"towers rows 1 and 2: carrier 'A' twice within 1 m"),
     (dict(towers=[(40.4, -4.2, 30.0)]), r"towers row 1: \(lat_deg, lon_deg, height_m, carrier\)"),
     (dict(towers="towers.csv"), "read a tower CSV first"),
     (dict(ism={"gps": 1.0}), r"ism\['gps'\] must be an araim.Ism"),
