@@ -47,7 +47,7 @@ def _warnings_as_lines():
     shown = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, UserWarning) and not issubclass(category, DeprecationWarning):
+        if issubclass(category, UserWarning):
             _warn(str(message))
         else:
             shown(message, category, filename, lineno, file, line)

@@ -539,6 +539,7 @@ class AvailabilityMap(SweepStudy):
             else float("nan")
         status = cube["status"][1]
         ok = status == 0
+        few = np.argwhere(status == Status.TOO_FEW_SOURCES)
         fin = lambda x: x[np.isfinite(x)]  # noqa: E731
         metrics = {
             "coverage_pct": 100.0 * cov,
@@ -552,7 +553,7 @@ class AvailabilityMap(SweepStudy):
                 cube["sigma_acc_m"][1] > req.sigma_acc_v_m)),
             "vpl_median_m": float(np.median(fin(cube["vpl_m"][1]))) if ok.any() else None,
             "hpl_median_m": float(np.median(fin(cube["hpl_m"][1]))) if ok.any() else None,
-            "epochs_too_few_sources": int(np.sum(status == Status.TOO_FEW_SOURCES)),
+            "epochs_too_few_sources": int(few.shape[0]),
             "gnss_in_view_min_mean_max": [int(cube["n_gnss"][1].min()),
                                           round(float(cube["n_gnss"][1].mean()), 3),
                                           int(cube["n_gnss"][1].max())],
@@ -570,7 +571,6 @@ class AvailabilityMap(SweepStudy):
                                for k, v in req._asdict().items()},
             "sky_source": sky_desc,
         }
-        few = np.argwhere(status == Status.TOO_FEW_SOURCES)
         if few.size:
             where = ", ".join(f"({lats[i]:g}, {lons[j]:g}) at {t[k]:g} s" for i, j, k in few[:3])
             warnings.warn(f"{few.shape[0]:,} of {status.size:,} user epochs "

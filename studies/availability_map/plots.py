@@ -76,14 +76,20 @@ def plot_maps(out_dir):
     return paths
 
 
+def _grid(ds):
+    """The map's cell edges (longitude, latitude) and the coastlines drawn over them."""
+    x_edges = cell_edges(ds["lon_deg"].values, log=False)
+    y_edges = cell_edges(ds["lat_deg"].values, log=False)
+    return x_edges, y_edges, coastline_lines(ds.attrs.get("coastlines", "none"), x_edges,
+                                             y_edges)
+
+
 def _plot_levels(ds, out_dir):
     import matplotlib.pyplot as plt
     from matplotlib.colors import BoundaryNorm, Normalize
 
     a = ds.attrs
-    lats, lons = ds["lat_deg"].values, ds["lon_deg"].values
-    x_edges, y_edges = cell_edges(lons, log=False), cell_edges(lats, log=False)
-    lines = coastline_lines(a.get("coastlines", "none"), x_edges, y_edges)
+    x_edges, y_edges, lines = _grid(ds)
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.6), layout="constrained")
     ax = axes[0]
     avail = 100.0 * ds["availability"].values
@@ -130,9 +136,7 @@ def _plot_difference(ds, out_dir):
     from matplotlib.colors import BoundaryNorm
 
     a = ds.attrs
-    lats, lons = ds["lat_deg"].values, ds["lon_deg"].values
-    x_edges, y_edges = cell_edges(lons, log=False), cell_edges(lats, log=False)
-    lines = coastline_lines(a.get("coastlines", "none"), x_edges, y_edges)
+    x_edges, y_edges, lines = _grid(ds)
     fig = plt.figure(figsize=(16, 7.4), layout="constrained")
     grid = fig.add_gridspec(2, 3, height_ratios=(4.0, 1.0))
     axes = [fig.add_subplot(grid[0, i]) for i in range(3)]

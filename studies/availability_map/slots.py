@@ -74,8 +74,9 @@ def constellation_orbits(gps, galileo, duration_s, step_s, sky_time="week", allo
             else:  # a nominal constellation: its own reference epoch
                 t0 = float(getattr(o, "reference_t_gps_s", 0.0))
             e, v, sv = o.sat_position_ecef(t0 + t_off, prns=o.prns[keep])
-            gaps = geometry.ephemeris_gaps(v, np.full(int(keep.sum()), code))
-            if isinstance(o, Ephemeris) and gaps.any() and not allow_gaps:
+            gaps = (geometry.ephemeris_gaps(v, np.full(int(keep.sum()), code))
+                    if isinstance(o, Ephemeris) and not allow_gaps else np.zeros(0, bool))
+            if gaps.any():  # almanacs and nominal orbits have no gaps
                 bad = np.flatnonzero(gaps)
                 raise ValueError(
                     f"{name}={Path(src).name}: no usable orbits for most satellites at "
