@@ -297,7 +297,8 @@ def fault_modes(valid, constellation, p_sat, p_const, p_thresh, max_order: int,
 
 
 # --------------------------------------------------------------------------------------------
-# Fault-mode conventions (issue 28): the ADD's enumeration of independent events, and ours.
+# Fault-mode conventions: the ADD's enumeration of independent events, and ours
+# (docs/conformance.md).
 # --------------------------------------------------------------------------------------------
 
 #: the conventions ``FaultModeRule`` accepts, by name (docs/conformance.md)

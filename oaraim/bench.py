@@ -258,7 +258,7 @@ def profile_mhss(batch=65_536, repeats=3):
 
 
 def bench_sky(repeats=3):
-    """Issue 4: GPS + Galileo skies. (a) one receiver, 24 h at 30 s (2,880 epochs) of the
+    """GPS + Galileo skies. (a) one receiver, 24 h at 30 s (2,880 epochs) of the
     nominal 48-satellite sky, and of the Villafranca broadcast file when the data are present;
     (b) 1,000 receivers (a 0.1-degree grid around Madrid) x 288 epochs (24 h at 5 min).
     Best of ``repeats`` after a compiling call; the file's parse is cached per process and
@@ -302,7 +302,7 @@ def bench_sky(repeats=3):
     return out
 
 
-#: batch sizes of the latency rows (issue 29: a notebook user and the per-epoch replays)
+#: batch sizes of the latency rows (a notebook user and the per-epoch replays)
 LATENCY_BATCHES = (1, 8, 64)
 
 

@@ -1,7 +1,7 @@
 """Benchmark: Monte Carlo runs of the seed 000 drive (1.35 km, 5 LTE towers, 100 Hz IMU, 10 Hz
 pseudoranges, fault on tower 1 from t = 25 s), EKF without and with exclusion, vmapped over runs.
 
-Target of issue 6: >= 1000 runs in <= 60 s on 2 cores. Wall time and process CPU time are both
+Target: >= 1000 runs in <= 60 s on 2 cores. Wall time and process CPU time are both
 reported (CPU time is steadier on a shared machine); compilation is timed separately. The
 run is single-stream: XLA's CPU backend executes this program on about one core (process CPU
 time ~ wall time), so the load average at the measurement is recorded too.
@@ -21,7 +21,7 @@ def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:
     scenario = sim.drive_seed000()
     setup = sim.drive_setup(scenario)
     keys = jax.random.split(jax.random.key(seed), runs)
-    # the default (realistic) error world with the scenario's fault (issue 25)
+    # the default (realistic) error world with the scenario's fault (docs/error-world.md)
     err = sim.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
                          fault_bias_m=scenario.fault_bias_m)
     fn = jax.jit(lambda k: sim.monte_carlo_drive(k, setup, err=err))

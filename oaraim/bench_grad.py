@@ -1,4 +1,4 @@
-"""Benchmark: the value and the gradient of the MHSS HPL (issue 27), beside the value alone.
+"""Benchmark: the value and the gradient of the MHSS HPL, beside the value alone.
 
 The Table I bench case (9 GPS + 4 BPP SOPs, ``grouped``, order 1; ``bench.mhss_bench_inputs``)
 through ``araim.protection_levels_kernel`` inside one ``jit_kernel`` program each (the
@@ -11,7 +11,7 @@ batches). The PL roots are differentiated by the implicit function theorem
 (``araim.mhss.implicit``) and the fault modes' least squares by their closed-form tangent
 (``araim.mhss.tangent``), so the gradient costs the transposed rules and two evaluations of
 the risk terms, not the root finder's iterations nor a replay of the factorisations. The
-goal of issue 27: the gradient at most 3x the cost of the value (docs/gradients.md).
+goal set for the gradients: at most 3x the cost of the value (docs/gradients.md).
 """
 
 import time

@@ -1,4 +1,4 @@
-"""Plain per-geometry NumPy/SciPy reference of the ARAIM / OARAIM MHSS solver (issue 3).
+"""Plain per-geometry NumPy/SciPy reference of the ARAIM / OARAIM MHSS solver.
 
 The oracle of ``araim.protection_levels``, ``araim.solution_separation`` and
 ``araim.detect_and_exclude``, and the "NumPy reference" of the benchmark (DESIGN.md). One geometry

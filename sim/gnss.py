@@ -60,9 +60,9 @@ RX_CLOCK_BIAS_M, RX_CLOCK_DRIFT_MPS = 1000.0, 0.3
 
 
 class GnssErrorModel(NamedTuple):
-    """The GNSS pseudorange errors of the mixed GNSS + SOP studies' truth (issue 25): consistent
-    with, but not identical to, the ADD models the protection levels assume
-    (``araim.error_models``: Gaussian, white, sigma_URA for integrity). Each term is a
+    """The GNSS pseudorange errors of the mixed GNSS + SOP studies' truth
+    (docs/error-world.md): consistent with, but not identical to, the ADD models the protection
+    levels assume (``araim.error_models``: Gaussian, white, sigma_URA for integrity). Each term is a
     first-order Gauss-Markov process per satellite (stationary start), plus a constant bias:
 
     * clock and ephemeris: sigma ``ure_over_ura`` x sigma_URA (the ADD's accuracy value,

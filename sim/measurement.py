@@ -18,7 +18,7 @@ IMU (``geometry.imu``): interval-mean samples, white noise plus first-order Gaus
 biases of the ``ImuSpec``.
 
 Draws: a drive epoch's key gives one normal vector (IMU, receiver clock, multipath, white
-noise: the layout of ``n_epoch_normals``, unchanged since before issue 25) and the named streams
+noise: the layout of ``n_epoch_normals``, unchanged since the clean world) and the named streams
 ``world_sop`` and ``world_nlos`` (``mc.STREAMS``); the GNSS period draws from the run key's
 ``world_calibration`` stream.
 """
@@ -47,8 +47,8 @@ class ErrorModel(NamedTuple):
 
     The defaults are the realistic world (docs/error-world.md: each default, its source, and
     which ones the papers leave open for a later calibration); ``ErrorModel.clean()`` is the
-    world before issue 25 (white noise, no multipath, NLOS or clock residual, the filter told
-    the truth's sigma), which the theorem checks and the exact-recovery tests use.
+    clean world the first studies used (white noise, no multipath, NLOS or clock residual,
+    the filter told the truth's sigma), which the theorem checks and the exact-recovery tests use.
 
     Pseudorange of tower n at time t (after the receiver's calibrated clock polynomial):
     ``z = range + c dt_rx - c dt_n,poly + mp_n + nlos_n + eps_n + common_op(n) - fit_n(t)
@@ -105,7 +105,7 @@ class ErrorModel(NamedTuple):
     @classmethod
     def clean(cls, sigma_pr_m=2.0, fault_tower=0, fault_onset_s=25.0, fault_bias_m=30.0,
               mp_sigma_m=0.0, mp_tau_s=5.0):
-        """The world before issue 25: white ``sigma_pr_m`` noise, optional unmodelled
+        """The clean world the first studies used: white ``sigma_pr_m`` noise, optional unmodelled
         multipath, no NLOS, no tower-clock residual, no calibration (the filter then uses
         ``sigma_pr_m``: it is told the truth)."""
         return cls(sigma_pr_m=sigma_pr_m, mp_sigma_m=mp_sigma_m, mp_tau_s=mp_tau_s,

@@ -1,4 +1,4 @@
-"""``rinex-replay``: real GNSS data, snapshot RAIM and ARAIM epoch by epoch (issue 6).
+"""``rinex-replay``: real GNSS data, snapshot RAIM and ARAIM epoch by epoch.
 
 RINEX observation + navigation files -> per epoch: L1 code pseudoranges corrected with the
 broadcast satellite clock (relativistic term and T_GD included), Klobuchar ionosphere and the

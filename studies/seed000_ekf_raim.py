@@ -22,7 +22,7 @@ Two parts, both through ``araim``'s EKF-RAIM (NIS detection, subset exclusion, X
    misleading-information (2D error > HPL) rate with its Clopper-Pearson interval
    (``mc.rate_with_interval``), per run (independent) and per epoch.
 
-The error world (issue 25; docs/error-world.md) is ``sim.ErrorModel()``: LTE thermal noise,
+The error world (docs/error-world.md) is ``sim.ErrorModel()``: LTE thermal noise,
 Gauss-Markov short-delay multipath, NLOS episodes, each tower's clock deviation and the
 operator's common term (seed 004 eq. 3), and the tower clocks fitted by least squares over a
 GNSS period before t = 0 (seed 000 II-D), whose residuals also give the filter its

@@ -1,4 +1,4 @@
-"""SOP requirements: how good must an SOP be before adding it lowers the HPL? (issue 27)
+"""SOP requirements: how good must an SOP be before adding it lowers the HPL?
 
 Seed 004's Fig. 4 answers on a grid (26 sigma_URA^S x 13 P_s^S cells x 5,000 draws per panel);
 Theorem 2 says one SOP never helps. This study finds, for n SOPs and each P_s^S, the largest

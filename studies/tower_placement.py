@@ -1,6 +1,6 @@
 """Tower placement: where should SOP towers stand so that a region's 99.5 % HPL is smallest?
 
-An inverse question seed 004 leaves to its readers (issue 27), answered with the exact
+An inverse question seed 004 leaves to its readers, answered with the exact
 gradients of the MHSS protection levels (docs/gradients.md). The region is a square grid of
 receivers (``region_half_m``, ``grid_n``, ``receiver_h_m`` up) around seed 004's Orange County
 receiver; the GPS sky is the day's broadcast (or nominal) sky at ``sky_step_s`` (one sky for

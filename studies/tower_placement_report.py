@@ -75,7 +75,7 @@ def finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
         {"quantity": "greedy + swap above the exhaustive best",
          "unit": "%" if prob.kind == "hpl" else "percentage points",
          "published": None, "reproduced": gap,
-         "note": "issue 27: within 1 % on the small cases"},
+         "note": "target: within 1 % on the small cases"},
         {"quantity": f"{lab}, selection refined by gradient (towers within "
                      f"{params['refine_radius_m']:g} m of their sites)", "unit": unit,
          "published": None, "reproduced": refined[1], "note": ""},

@@ -42,7 +42,7 @@ def test_yuma_reader_values(almmops):
 
 
 def test_almmops_is_the_sps_24_slot_constellation_up_to_a_common_rotation(almmops):
-    """Issue 4: the DO-229 almanac (MAAST almmops.txt) against the built-in SPS PS 24-slot
+    """The DO-229 almanac (MAAST almmops.txt) against the built-in SPS PS 24-slot
     constellation. Orbital elements: same a and i; each almanac satellite sits in one slot with the
     same
     argument of latitude at its own epoch (the almanac's t_oa, the SPS epoch); the node
@@ -203,7 +203,7 @@ def _line_of(text, needle):
     ("SQRT(A)  (m 1/2)", "-5153.6", "> 0"), ("Health", "1.5", "integer")])
 def test_yuma_unphysical_values_are_parse_errors_with_the_line(shared_data, tmp_path, field,
                                                                bad, why):
-    """Issue 30: 'Eccentricity: nan' or 1.5 loaded a healthy satellite with a NaN position, a
+    """'Eccentricity: nan' or 1.5 loaded a healthy satellite with a NaN position, a
     negative sqrt(A) was accepted. Now: the file and the line of the first record's field."""
     text = (shared_data / "almanac" / "almmops.txt").read_text()
     line = next(ln for ln in text.splitlines() if ln.startswith(field))

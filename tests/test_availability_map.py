@@ -1,4 +1,4 @@
-"""availability-map (issue 20): the service-level criteria by hand, the grid's sky against
+"""availability-map: the service-level criteria by hand, the grid's sky against
 geometry.sky, every PL of a small map against the NumPy oracle, SOP towers (BPP and CSV), the
 sweep engine's index kernels and Values reducer, and the command line."""
 
@@ -356,7 +356,7 @@ GOOD_TOWERS = "lat_deg,lon_deg,height_m,carrier\n50.01,0.0,40,A\n50.0,0.02,30,B\
     (GOOD_TOWERS + '50.0,0.03,30,"B\n', r"line 4: not CSV"),
     (GOOD_TOWERS + "50.0,0.03,30,B\x00\n", r"line 4: control character")])
 def test_tower_csv_errors_name_file_and_line(tmp_path, content, message):
-    """Issue 30: a short row gave a traceback, a binary file an error without its name, six
+    """A short row gave a traceback, a binary file an error without its name, six
     identical rows six independent SOPs, a file cut short lost its last tower, a NUL byte gave
     a csv.Error. Each is now one TowerFileError (a ValueError) naming the file and the line."""
     f = tmp_path / "towers.csv"

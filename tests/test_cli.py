@@ -78,7 +78,7 @@ def test_list_shows_studies_and_parameters():
 
 
 def test_list_prints_every_help_text_literally():
-    """Issue 30: help texts are not Rich markup ("towers within [d_min_m, d_max_m] of a user"
+    """Help texts are not Rich markup ("towers within [d_min_m, d_max_m] of a user"
     lost its brackets): every study's title and every parameter's text appear verbatim
     (whitespace folded, as the console wraps)."""
     from oaraim.registry import STUDIES
@@ -109,7 +109,7 @@ def test_report_without_results_is_a_clear_error(tmp_path):
     assert "no study results" in _one_error_line(r)
 
 
-# ------------------------------------------------ the output folder (issue 30 item 4)
+# ------------------------------------------------------------------------ the output folder
 
 FAST = ("run", "seed001-fig4-hpl-cdf", "--realizations", "1500", "--no-progress")
 
@@ -176,7 +176,7 @@ def test_a_run_that_fails_while_writing_leaves_no_summary(tmp_path, monkeypatch)
 
 
 def test_huge_realization_count_is_refused_before_computing():
-    """Issue 30 item 7: a non-sweep study keeps its realizations in memory; 1e12 was accepted
+    """A non-sweep study keeps its realizations in memory; 1e12 was accepted
     and grew until killed. Refused with one line naming the limit (20 x the default)."""
     r = _run("run", "seed001-fig4-hpl-cdf", "--realizations", "1000000000000", "--no-progress")
     assert r.exit_code == 2

@@ -235,7 +235,7 @@ def event_cases():
 @pytest.mark.parametrize("rule, order", [("add-v4.2", 1), ("add-v4.2", 2), ("add-v3", 2),
                                          ("blanch-2012", 2)])
 def test_event_conventions_match_the_oracle(event_cases, rule, order):
-    """Issue 28 item 4: the batched kernel against the oracle's enumeration to 1e-5 m where
+    """The batched kernel against the oracle's enumeration to 1e-5 m where
     both are OK (the PLs: the kernel's root within 1e-4 m above, the oracle's bisection within
     1e-6 m: 2e-3 m as test_mhss.py), same status, modes, order and P_NM."""
     g, const, vi, va, b, ps, pc, valid = event_cases
@@ -310,7 +310,7 @@ OPT_ALWAYS = araim.PositionOptimization(keep="always")
 
 
 def test_position_optimization_matches_the_oracle(event_cases):
-    """Issue 28 item 7: the kernel's adjusted estimator (``keep="always"``) against the
+    """The kernel's adjusted estimator (``keep="always"``) against the
     oracle's (which finds t by brentq instead of the quadratic formula) on the random GPS +
     Galileo / GPS + SOP cases: the same PLs, EMT and sigma_acc to 2e-3 m; the row moves in
     most cases. MAAST's trigger and keep rule are checked against MAAST itself below."""
@@ -437,7 +437,7 @@ def test_position_optimization_matches_maast_for_araim_2():
 
 
 def test_availability_map_geometries_match_maast_for_araim_2():
-    """Issue 28 item 7, per user-epoch: 72 user-epochs of the default world map's rows at
+    """Per user-epoch: 72 user-epochs of the default world map's rows at
     -70 and 70 deg (24 where our map keeps the position estimator, 48 at lon 70 every hour)
     with the map's own inputs (sky, mask, C_int, C_acc, b_nom, P_sat), run through MAAST for
     ARAIM 2's usr_vhpl_araim under Octave (tools/maast_map_rows.py and .m: LPV-200, the

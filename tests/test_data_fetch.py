@@ -1,4 +1,4 @@
-"""oaraim.data and `oaraim data` against a loopback mirror of ../shared/data (issue 19).
+"""oaraim.data and `oaraim data` against a loopback mirror of ../shared/data.
 
 Every server here is an http.server on 127.0.0.1, port 0, in a thread, shut down at teardown;
 nothing leaves the machine. The mirror counts the requests it answers, so a cache hit is seen
@@ -242,7 +242,7 @@ def test_cli_data_nav_errors(serve, cache, tmp_path):
 def test_cli_data_nav_refuses_a_download_that_is_not_navigation(shared_data, serve, cache,
                                                                 tmp_path, served):
     """An archive answering with an HTML page, another RINEX type or a cut file: one line
-    naming the URL and what is wrong, and nothing cached (issue 30 item 9)."""
+    naming the URL and what is wrong, and nothing cached."""
     day = tmp_path / "archive" / "2010" / "182"
     day.mkdir(parents=True)
     nav = (shared_data / "nav/brdc1820.10n").read_bytes()
@@ -382,7 +382,7 @@ def test_cli_source_never_points_at_its_own_folder():
     shutil.which("oaraim")  # the entry point exists in the venv
 
 
-# ------------------------------------------ local data verified (issue 30 item 5)
+# ------------------------------------------------------------------ local data verified
 
 
 def _edited_folder(shared_data, tmp_path):
@@ -458,7 +458,7 @@ def test_changed_cached_broadcast_file_is_refused(shared_data, serve, cache, tmp
         data.fetch_daily_nav("2010-07-01", url, progress=False)
 
 
-# ------------------------------ the tests get their data as users do (issue 30 item 8)
+# ------------------------------------------------- the tests get their data as users do
 
 
 def test_link_folder_fetches_verifies_and_links(shared_data, serve, cache, tmp_path,

@@ -131,7 +131,7 @@ def test_missing_epochs_become_prediction_only(drive):
 
 
 def test_study_defaults_are_the_realistic_world_and_the_scenario_fault():
-    """Issue 25: the studies' default world is ``sim.ErrorModel()`` (the realistic one) with
+    """The studies' default world is ``sim.ErrorModel()`` (the realistic one) with
     the scenario's fault, except the parameters a study calibrated (``calibrated``: seed 000's
     fault size and multipath, fitted to its RMSEs by ``oaraim calibrate``) and the world
     parameters it chose on its own evidence (``chosen``: seed 000's NLOS rate 0)."""

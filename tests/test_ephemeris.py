@@ -39,7 +39,7 @@ def test_circular_orbit_by_hand():
 
 
 def test_broadcast_vs_precise_orbits_whole_day(brdc182, igs1590_4):
-    """Issue 4: broadcast (brdc1820.10n) vs IGS final (igs15904.sp3), 2010-07-01, every healthy
+    """Broadcast (brdc1820.10n) vs IGS final (igs15904.sp3), 2010-07-01, every healthy
     satellite at every 15-min SP3 epoch (2,880 satellite-epochs).
 
     Measured: median 1.64 m, 95 % 3.30 m, max 5.71 m. The broadcast orbit refers to the antenna
@@ -202,7 +202,7 @@ def _field(line, k, text, start=3):
      r"line 9: cannot read the record epoch '10 13  1  0  0  0\.0' \(month must be"),
 ])
 def test_unphysical_or_duplicated_records_name_the_line(shared_data, tmp_path, edit, message):
-    """Issue 30: a record with e >= 1, sqrt(A) <= 0, a blank element or an overflowing number
+    """A record with e >= 1, sqrt(A) <= 0, a blank element or an overflowing number
     was dropped as "implausible" (or read as 0 / inf) without a word, a duplicated record was
     taken twice; now each is a NavigationFileError naming the file, the line and the columns."""
     lines = (shared_data / "nav" / "brdc1820.10n").read_text().splitlines()

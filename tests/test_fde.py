@@ -4,7 +4,8 @@ Residuals are measurement errors y (L,): (S^(i) - S^(0)) H = 0, so the separatio
 residual at the true linearisation point are those of the errors. Oracle: tests/reference_mhss.py.
 
 Fixed seeds. Tolerances: separations and thresholds to 1e-7 relative (S y from two different
-factorisations; the worst subsets here have condition numbers ~1e8), PLs to 2e-3 m (issue 3).
+factorisations; the worst subsets here have condition numbers ~1e8), PLs to 2e-3 m
+(the MHSS oracle tolerance of tests/test_mhss.py).
 Compiled shapes: L = 18 (12 GPS + 6 SOP slots), C = 2, order 1 for the FDE cases; the L = 28
 random set of test_mhss.py for the separation-vs-oracle test.
 """

@@ -1,4 +1,4 @@
-"""Gradients of the MHSS protection levels (issue 27): ``jax.jvp`` / ``jax.grad`` through
+"""Gradients of the MHSS protection levels: ``jax.jvp`` / ``jax.grad`` through
 ``araim.protection_levels_kernel``, whose PL roots are differentiated by the implicit function
 theorem (``araim.mhss.implicit``), against hand derivations, central finite differences of the
 kernel and of the NumPy oracle, and ``jax.test_util.check_grads``.

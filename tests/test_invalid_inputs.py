@@ -1,4 +1,4 @@
-"""Issue 30 item 1: unusable kernel inputs are refused by the host wrappers (one ValueError
+"""Unusable kernel inputs are refused by the host wrappers (one ValueError
 naming the argument, the batch index and the source) and reported as Status.INVALID_INPUT by
 the kernels under jit (inf PLs, no detection, no exclusion, no NaN anywhere).
 

@@ -3,7 +3,7 @@
 The oracle is tests/reference_mhss.py (plain per-geometry NumPy/SciPy, enumerated modes, clock
 columns literally removed, bisection to 1e-6 m). Tolerances:
 
-- PLs and EMT within 2e-3 m (issue 3): the solver returns a PL within 1e-3 m above the root, the
+- PLs and EMT within 2e-3 m: the solver returns a PL within 1e-3 m above the root, the
   oracle's bisection is good to 1e-6 m, the rest is float64 rounding of 5x5-ish systems.
 - sigma_acc_u, P_not_monitored to a relative 1e-7: both are closed-form sums/products; the
   margin covers the conditioning of the normal matrices (~1e6 at worst here) times 1e-16.
@@ -37,8 +37,8 @@ C = 4
 P_CONST = np.array([1e-8, 1e-4, 1e-4, 1e-4])  # GPS (Table I), Galileo (ADD), SOP (Table I)
 SIGMA_URA_S = np.array([0.5, *range(1, 26)], float)  # DESIGN.md Fig. 4 grid, 26 values
 P_S_S = 10.0 ** (-7.0 + 0.5 * np.arange(13))  # 1e-7 .. 1e-1, two per decade, 13 values
-N_RANDOM = 2000  # issue 3: >= 2000 geometries against the oracle
-PL_TOL_M = 2e-3  # issue 3
+N_RANDOM = 2000  # >= 2000 geometries against the oracle
+PL_TOL_M = 2e-3  # solver 1e-3 m above the root + oracle 1e-6 m + rounding
 TABLE_I = None  # set lazily: araim.BUDGET_SEED004_TABLE_I
 
 _sky = jax.jit(geometry.random_sky, static_argnums=(1, 3))
@@ -56,7 +56,7 @@ def rows(az_rad, el_rad):
 
 
 def random_cases(seed, n):
-    """n random GPS + SOP geometries spanning Table I (issue 3), padded to L = 28, rows shuffled.
+    """n random GPS + SOP geometries spanning Table I, padded to L = 28, rows shuffled.
 
     GPS: 5..12 random-sky satellites above a 5, 10 or 15 deg mask; Galileo on for half of the
     geometries (4..8 satellites, same mask); 1..8 BPP towers (distance 200..3000 m, height

@@ -374,7 +374,7 @@ def test_loader_rejects_folder_level_problems(rec, tmp_path):
      r"position and clock group of 'T1' \(row 0\)"),
 ])
 def test_csv_cut_short_garbled_or_duplicated_names_the_line(rec, tmp_path, table, edit, message):
-    """Issue 30: a CSV table cut short lost (or truncated) its last row without a word, bytes
+    """A CSV table cut short lost (or truncated) its last row without a word, bytes
     that are not UTF-8 or a broken quote gave an error without a line, and a transmitter listed
     again under a new id counted as a second independent range. Each now names the file
     line."""

@@ -112,7 +112,7 @@ def _write_obs(tmp_path, name, lines_or_bytes):
 
 
 def test_obs_file_cut_short_names_the_line(shared_data, tmp_path):
-    """Issue 30: a file cut in half loaded 59 of 60 epochs without a word. Cut mid-line (a
+    """A file cut in half loaded 59 of 60 epochs without a word. Cut mid-line (a
     download cut short) or at a line break inside an epoch, it is now an error naming the line;
     lenient reading keeps the complete epochs and names the skipped one."""
     raw = (shared_data / "obs" / "07590920.05o").read_bytes()
@@ -135,7 +135,7 @@ def test_obs_file_cut_short_names_the_line(shared_data, tmp_path):
 
 @pytest.mark.parametrize("minute", ["6x", "61"])
 def test_garbled_epoch_time_names_the_line(shared_data, tmp_path, minute):
-    """Issue 30: an epoch with a garbled time was dropped silently (119 of 120 epochs). Strict:
+    """An epoch with a garbled time was dropped silently (119 of 120 epochs). Strict:
     an error naming line 63; lenient: the other 119 epochs and a warning naming line 63."""
     lines = _obs_lines(shared_data)
     assert lines[62].startswith(" 05  4  2  0  2 30.0000000")

@@ -78,7 +78,7 @@ def test_parameters_rejected_with_field_names():
 
 
 def test_auto_sky_without_the_file_stops_with_one_line(tmp_path, monkeypatch):
-    """No silent fallback (issue 19): nav=auto with the Villafranca file nowhere stops before
+    """No silent fallback: nav=auto with the Villafranca file nowhere stops before
     any computation, exit 2, one line naming the file, the fetch command and nav=nominal."""
     from typer.testing import CliRunner
 

@@ -204,7 +204,7 @@ def test_keys_do_not_depend_on_axis_values_for_common_random_numbers():
     jax.block_until_ready(mc.realization_keys(0, a, 0, 4))
 
 
-# ------------------------------------------------------------------ seed004-uav (issue 25 item 3)
+# ------------------------------------------------------------------------------ seed004-uav
 def test_uav_tower_table_is_the_papers_carriers_by_operator():
     """Seed 004 VII-A: 11 towers on 739, 1955 (AT&T), 2125 (T-Mobile), 2145 MHz (Verizon);
     numbered operator by operator so that SOPs 1 and 2 share a clock (Fig. 8)."""
@@ -241,7 +241,7 @@ def test_uav_constellations_by_operator_and_prn8(uav_runs):
 
 
 def test_uav_mi_check_can_fail(uav_runs):
-    """Issue 25 item 6 on the UAV, in the realistic world (the default): no epoch of GPS + 11
+    """The MI check on the UAV, in the realistic world (the default): no epoch of GPS + 11
     SOPs has HPE > HPL (MHSS all-in-view bounds a single SOP fault at P_s^S = 1e-4, and the
     world's LTE errors, ~4 m RMS over the flight, stay under the HPL); a 120 m bias (40
     sigma_URA^S) on SOP 2 is beyond what the PL covers without detection, and MI becomes
@@ -276,7 +276,7 @@ WHITE_NOISE_DETECTION_S = (6.645833333333334, 6.645833333333334)
 
 
 def test_uav_clean_world_is_the_white_noise_flight(uav_runs):
-    """world=clean is the study before issue 25's error world: the same draws (epoch k from
+    """world=clean is the study before the realistic error world: the same draws (epoch k from
     fold_in(key(seed), k)), the same HPE to rounding, the same detection times; the HPL
     depends on the world only through the linearisation point (geometry and the PL's sigmas)."""
     clean, real = uav_runs[2], uav_runs[0]

@@ -88,7 +88,7 @@ def test_recording_round_trip_replays_identically(tmp_path, shared_data):
 
 
 def test_vehicle_mi_check_can_fail(shared_data):
-    """Issue 25 item 6: in the clean world (truth drawn from the PL's own model, LTE 2 m) HPE >
+    """The MI check: in the clean world (truth drawn from the PL's own model, LTE 2 m) HPE >
     HPL is rare; an error outside that model makes it common: a constant 40 m bias (20 sigma)
     on LTE tower 1, beyond the bias the slope HPL covers with P_MD (smaller ones, 12 m, still
     stay under it on this drive: the GPS satellites dominate). The MI rates come with

@@ -44,7 +44,7 @@ def test_no_package_file_above_the_line_limit(rep):
 
 
 def test_every_public_function_class_and_method_has_a_docstring(rep):
-    """Issue 26 item 7: what mkdocstrings renders says what it is (private modules and names,
+    """What mkdocstrings renders says what it is (private modules and names,
     and dunders such as ``__init__``, are not asked)."""
     assert rep["undocumented"] == []
 

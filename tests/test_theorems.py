@@ -32,7 +32,7 @@ from oaraim.araim.error_models import gnss_variances, sop_variances
 # oracle; the ADD conventions are tested in test_conformance.py
 solution_separation = partial(araim.solution_separation, fault_modes="grouped")
 
-N_GEOM = 1000  # issue 3: >= 1000 random geometries
+N_GEOM = 1000  # >= 1000 random geometries
 L = 13
 SOP = 12  # the SOP's row
 RAISE_TOL_M = 2e-3  # DESIGN.md: new >= old - 2 x the 1e-3 m solver tolerance

@@ -1,5 +1,5 @@
 """The tower-placement study: its geometry and objective by hand, its gradient against central
-differences, and its selection against exhaustive search (issue 27: within 1 %)."""
+differences, and its selection against exhaustive search (within 1 %)."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -74,7 +74,7 @@ def test_surrogate_gradient_matches_central_differences(problem):
 
 
 def test_greedy_swap_within_one_percent_of_exhaustive(problem):
-    """Issue 27: selection of 3 of 8 sites on the exact objective, greedy + swap against every
+    """Selection of 3 of 8 sites on the exact objective, greedy + swap against every
     one of the 56 subsets."""
     rng = np.random.default_rng(7)
     sites = np.concatenate([rng.uniform(-3000, 3000, (8, 2)), np.full((8, 1), 30.0)], -1)

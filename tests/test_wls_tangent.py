@@ -1,4 +1,4 @@
-"""The hand-written derivative rule of the MHSS projection (``araim.mhss.tangent``, issue 27)
+"""The hand-written derivative rule of the MHSS projection (``araim.mhss.tangent``)
 against automatic differentiation of the same function without it.
 
 ``projection.int_weighted_modes`` is a ``jax.custom_jvp`` whose rule is the closed-form

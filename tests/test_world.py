@@ -1,4 +1,4 @@
-"""The simulated error world of issue 25 (``sim.measurement``: multipath, NLOS episodes, tower
+"""The simulated error world (``sim.measurement``: multipath, NLOS episodes, tower
 clocks and the GNSS-period fit, the empirical filter sigma) and the Clopper-Pearson interval
 (``mc.intervals``): closed forms by hand, statistics with fixed seeds (tolerances from the
 sample counts), and the checks that make the drives' MI counts able to fail."""

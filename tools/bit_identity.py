@@ -1,4 +1,4 @@
-"""Bit-identity check for kernel speed-ups (issue 29: "the same results bit for bit").
+"""Bit-identity check for kernel speed-ups: a speed-up keeps the same results bit for bit.
 
     python tools/bit_identity.py save REF.npz     # on the code before the change
     python tools/bit_identity.py check REF.npz    # after it: every output compared exactly

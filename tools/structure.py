@@ -38,7 +38,7 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: the largest package file allowed, in lines (issue 26)
+#: the largest package file allowed, in lines (a file a reader can hold)
 MAX_LINES = 700
 
 #: layer -> the layers it may import (besides itself); docs/design.md draws this table
@@ -50,7 +50,7 @@ LAYERS = {
     "geometry": {"constants"},
     "araim": {"geometry", "constants", "config"},
     "mc": {"config"},
-    "sim": {"araim", "geometry", "constants", "mc"},  # mc: the named key streams (issue 25)
+    "sim": {"araim", "geometry", "constants", "mc"},  # mc: the named key streams
     "data": {"geometry"},                       # oaraim.data: the real files, checked
     "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config"},
     "app": {"studies", "araim", "geometry", "mc", "sim", "data", "constants", "config",

@@ -170,7 +170,7 @@ def _result(pr, pl, status, emt, sigma_acc_u, adjusted):
     """The batch-first ``MHSSResult`` of a batch-last projection and its PLs (3, B)."""
     ok = status == Status.OK
     # the HPL of the finite PLs, inf where not OK: the same values, and no inf / inf = NaN in
-    # its derivative there (issue 27)
+    # its derivative there (docs/gradients.md)
     pl_ok = jnp.where(ok[None], pl[:2], 0.0)
     hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
     out = MHSSResult(

@@ -1,4 +1,4 @@
-"""Exact derivatives of the PL roots by the implicit function theorem (issue 27).
+"""Exact derivatives of the PL roots by the implicit function theorem (docs/gradients.md).
 
 A PL solves F(PL, theta) = R(PL) - rhs = 0 with the risk sum of seed 004 eqs. (14)/(16)
 

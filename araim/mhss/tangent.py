@@ -1,5 +1,5 @@
 """The linear tangent of every fault mode's weighted least squares (seed 004 eqs. 9-11), the
-derivative rule of ``projection.project``'s C_int-weighted modes (issue 27).
+derivative rule of ``projection.project``'s C_int-weighted modes (docs/gradients.md).
 
 Automatic differentiation of the projection as ``project`` computes it (unrolled Cholesky
 factors, rank-one downdates, sums over sources written out slice by slice) transposes every

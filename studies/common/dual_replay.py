@@ -92,14 +92,15 @@ def user_sigma_m(el_rad, noise_factor, model="add"):
 
 def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM_GALILEO),
                 airborne_model="add", gps_pair="l1l5", tropo="mops", n_passes=3,
-                single=False):
+                single=False, systems="GE"):
     """Per-epoch inputs of ``araim.snapshot.replay`` for the dual-frequency user (module
     docstring), in the layout of ``studies.rinex_replay.gnss_replay_inputs`` plus
     ``constellation`` (T, S) clock groups, ``p_sat``, ``b_nom_m`` (T, S), ``p_const`` (C,),
     ``combination`` (T, S) pair codes, ``constellations`` (names) and ``sv`` (S,).
 
-    ``single=True``: the single-frequency GPS L1 + Galileo E1 user instead (``SINGLE_NOTE``)."""
-    table = table.select("GE")
+    ``single=True``: the single-frequency GPS L1 + Galileo E1 user instead (``SINGLE_NOTE``).
+    ``systems``: the constellations used, by RINEX letter ("GE", "G" or "E")."""
+    table = table.select(systems)
     t = table.t_gps_s
     sv = table.sv
     iof = dfq.single_frequency(table) if single else dfq.iono_free(table, gps_pair)
@@ -179,6 +180,7 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
         "b_nom_m": np.broadcast_to(b_nom, (n_t, n_s)).copy(),
         "p_const": tuple(i.p_const for i in used_isms),
         "combination": np.where(v, iof.combination, 0).astype(np.int8),
+        "l5_offset_m": iof.l5_offset_m, "gps_pair": "single" if single else gps_pair,
         "constellations": [SYSTEMS[k][1] for k in present], "sv": sv, "ephemeris": eph,
     }
 
@@ -257,6 +259,13 @@ def summary_extras(inp, out, sv):
                                   for c in dfq.COMBINATION_NAMES}
         m["satellites_used_median_per_constellation"] = {
             name: float(np.median(used[:, mk].sum(-1))) for name, mk in _labels(inp, sv)}
+        off = np.asarray(inp.get("l5_offset_m", np.full(len(sv), np.nan)))
+        on_l5 = (comb == dfq.GPS_L1L5).any(0)
+        m["gps_pair"] = inp.get("gps_pair", "l1l5")
+        m["gps_l5_offset_removed_m"] = {str(s): round(float(off[j]), 3)
+                                        for j, s in enumerate(sv) if np.isfinite(off[j])}
+        m["gps_l5_uncorrected"] = [str(s) for j, s in enumerate(sv)
+                                   if on_l5[j] and not np.isfinite(off[j])]
     else:
         m["constellations"] = ["GPS"]
         m["combination"] = "GPS L1 single frequency (L1 C/A code), Klobuchar"

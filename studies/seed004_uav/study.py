@@ -112,7 +112,7 @@ def synthesize(params, seed, scenario=None):
 
 def inject_bias(geom, pr, params):
     """pr with ``inject_sop_bias_m`` added to SOP ``inject_sop`` (1-based, SOP order) at
-    every epoch: an error outside the PL's model, for the MI check (issue 25 item 6)."""
+    every epoch: an error outside the PL's model, for the MI check."""
     if params["inject_sop_bias_m"] == 0.0:
         return pr
     tw = np.flatnonzero(~geom.is_gps)
@@ -265,7 +265,7 @@ class Seed004Uav(Study):
                                          "004 studies; P_s^S = 1e-4 (VII)"),
         "inject_sop_bias_m": Param(0.0, in_range(-1e4, 1e4), "constant bias added to SOP "
                                    "inject_sop's pseudoranges, outside the PL's model (MI "
-                                   "check, issue 25 item 6; 0 = off)", "m"),
+                                   "check; 0 = off)", "m"),
         "inject_sop": Param(1, count(1, 11), "SOP number (towers.py) that inject_sop_bias_m "
                             "biases"),
         "exclusion": Param(True, parse_bool, "GPS + all SOPs also with detect_and_exclude "

@@ -10,8 +10,8 @@ What we chose (before any result, documented here, not fitted):
 
 - carrier -> operator: 739 MHz (LTE band 17 downlink) and 1955 MHz (band 2, PCS downlink)
   AT&T, 2125 MHz T-Mobile and 2145 MHz Verizon (both band 4/66, AWS downlink); seed 004 lists
-  the four frequencies and the three operators in that order, issue 25 item 3 gives the
-  assignment;
+  the four frequencies and the three operators in that order; the assignment is our
+  reading of that order;
 - towers per carrier 3, 2, 3, 3 (AT&T 5 on two carriers, T-Mobile 3, Verizon 3): 11 in all;
 - SOP constellations by operator (eq. 3: the towers of one operator share a common clock term,
   so one clock state per operator; the two AT&T carriers are one network);
