@@ -22,7 +22,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import bucket, is_traced, jit_kernel, pad_rows, unpad
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
@@ -44,6 +43,7 @@ from oaraim.araim.mhss import (
 )
 from oaraim.araim.status import Status
 from oaraim.araim.validate import batch_source, check_int
+from oaraim.batching import bucket, is_traced, jit_kernel, pad_rows, unpad
 
 
 class Separation(NamedTuple):
@@ -293,7 +293,7 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
                   fault_modes=rule)
     if bad is None or is_traced(args):
         return fn(*args, y, **static)
-    # padded to a bucket size (araim.batching.bucket): a handful of compiled shapes
+    # padded to a bucket size (oaraim.batching.bucket): a handful of compiled shapes
     batch = args[0].shape[:-2]
     n = int(np.prod(batch, dtype=np.int64))
     flat = [np.asarray(x).reshape((n,) + x.shape[len(batch):]) for x in (*args, y)]

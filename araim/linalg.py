@@ -10,6 +10,10 @@ matrix size, unrolled at trace time.
 import jax
 import jax.numpy as jnp
 
+# the stores XLA must not recompute live in the neutral speed layer; the kernels of araim
+# reach them as linalg.materialize and linalg.blocks
+from oaraim.batching import blocks, materialize  # noqa: F401
+
 #: a pivot smaller than this fraction of the largest diagonal entry marks the matrix singular
 #: (condition number beyond ~1e10). The design columns here are all dimensionless (unit-vector
 #: components and clock indicators), so the largest diagonal entry is the natural scale; a
@@ -38,30 +42,6 @@ max_axis = unrolled(jnp.maximum)
 min_axis = unrolled(jnp.minimum)
 any_axis = unrolled(jnp.logical_or)
 prod_axis = unrolled(jnp.multiply)
-
-
-def materialize(x):
-    """Identity (NaN stays NaN) that XLA computes once and stores. XLA's fusion duplicates a
-    cheap elementwise producer into every consumer, also into one that broadcasts it; here that
-    repeated a whole unrolled solve for every element of an (L, L, B) product (measured: most
-    of the kernel). A division is 'expensive' for XLA and is never duplicated that way."""
-    if not jnp.issubdtype(x.dtype, jnp.floating):  # labels and masks: exact through float64
-        y = x.astype(jnp.float64)
-        return (y / (y == y).astype(y.dtype)).astype(x.dtype)
-    return x / (x == x).astype(x.dtype)
-
-
-def blocks(parts):
-    """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
-    concatenation with the computations of its parts into one loop that branches on every
-    element (measured: a scalar loop, 10x slower than the parts alone); an update slice loops
-    over its part only."""
-    out = jnp.zeros((sum(p.shape[0] for p in parts),) + parts[0].shape[1:], parts[0].dtype)
-    start = 0
-    for p in parts:
-        out = jax.lax.dynamic_update_slice_in_dim(out, p, start, axis=0)
-        start += p.shape[0]
-    return out
 
 
 def sqrt0(x):

@@ -18,7 +18,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import map_chunks
 from oaraim.araim.chi2 import lambda_det_table
 from oaraim.araim.status import Status
 from oaraim.araim.validate import (
@@ -28,6 +27,7 @@ from oaraim.araim.validate import (
     host_values,
     unit_norm,
 )
+from oaraim.batching import map_tiles
 
 N_STATES = 4  # east, north, up, receiver clock
 
@@ -93,7 +93,7 @@ def _invalid_input(g, sigma_m, valid):
 def slopes_kernel(g, sigma_m, valid) -> Slopes:
     """The RAIM slopes of ``slopes`` as a pure JAX function of arrays of one batch shape: g
     (..., L, 3), sigma_m and valid (..., L) (standard deviations in metres, bool). Callable
-    inside ``jax.jit`` and ``jax.vmap`` (one program, no chunking). A geometry with a
+    inside ``jax.jit`` and ``jax.vmap`` (one program, no tiling). A geometry with a
     non-finite or non-unit row or a sigma that is not finite and > 0 at a valid source gets
     ``Status.INVALID_INPUT`` and infinite slopes; nothing raises."""
     invalid = _invalid_input(g, sigma_m, valid)
@@ -124,24 +124,24 @@ def slopes_kernel(g, sigma_m, valid) -> Slopes:
     return Slopes(slopes, slope_max, dof, status)
 
 
-#: geometries per chunk of the public ``slopes`` and ``slope_hpl`` (``araim.batching.map_chunks``).
+#: geometries per tile of the public ``slopes`` and ``slope_hpl`` (``oaraim.batching.map_tiles``).
 #: Measured with M + N = 9, batch 262,144, 2 cores, one call (XLA spreads it), 3 rounds
-#: of best of 3: unchunked 3.0-3.1M HPL/s; chunks of 1024 / 2048 / 4096 / 8192 / 16384: 3.5M /
-#: 4.0M / 4.5-4.7M / 4.7-4.9M / 5.0-5.1M (two host threads over 4096-16384 chunks: 3.8-4.2M,
-#: slower). Chunks of >= 4096 gave HPLs bit-identical to the unchunked call there; 1024 and 2048
+#: of best of 3: untiled 3.0-3.1M HPL/s; tiles of 1024 / 2048 / 4096 / 8192 / 16384: 3.5M /
+#: 4.0M / 4.5-4.7M / 4.7-4.9M / 5.0-5.1M (two host threads over 4096-16384 tiles: 3.8-4.2M,
+#: slower). Tiles of >= 4096 gave HPLs bit-identical to the untiled call there; 1024 and 2048
 #: differed by up to 4.7e-13 relative (XLA compiles small shapes differently).
-SLOPE_CHUNK = 16384
+SLOPE_TILE = 16384
 
 
 @jax.jit
-def _slopes_chunked(g, sigma_m, valid):
-    return map_chunks(lambda *xs: slopes_kernel(*xs), (g, sigma_m, valid),
-                      g.shape[:-2], chunk=SLOPE_CHUNK)
+def _slopes_tiled(g, sigma_m, valid):
+    return map_tiles(lambda *xs: slopes_kernel(*xs), (g, sigma_m, valid),
+                     g.shape[:-2], tile=SLOPE_TILE)
 
 
 def _slope_hpl_body(g, sigma_m, valid, lambda_table):
     """The slope HPL of ``slope_hpl`` as a jitted JAX function of arrays
-    of one batch shape (one program, no chunking; inline under a caller's ``jit`` or ``vmap``):
+    of one batch shape (one program, no tiling; inline under a caller's ``jit`` or ``vmap``):
     ``slope_hpl_kernel(g, sigma_m, valid, lambda_table) -> SlopeHPL`` with g (..., L, 3), sigma_m
     (metres) and valid (..., L), and ``lambda_table`` the non-centralities by dof
     (``araim.lambda_det_table(p_fa, p_md, max_dof)``). Bad inputs give ``Status.INVALID_INPUT``
@@ -157,12 +157,12 @@ slope_hpl_kernel = jax.jit(_slope_hpl_body)
 
 
 @jax.jit
-def slope_hpl_chunked(g, sigma_m, valid, lambda_table):
-    """``slope_hpl_kernel`` in chunks of ``SLOPE_CHUNK`` (batches of at most one chunk at their
+def slope_hpl_tiled(g, sigma_m, valid, lambda_table):
+    """``slope_hpl_kernel`` in tiles of ``SLOPE_TILE`` (batches of at most one tile at their
     own shape): what ``slope_hpl`` runs after its argument checks, and what ``oaraim bench``
     times. Arguments and result as ``slope_hpl_kernel``."""
-    return map_chunks(lambda *xs: _slope_hpl_body(*xs, lambda_table), (g, sigma_m, valid),
-                      g.shape[:-2], chunk=SLOPE_CHUNK)
+    return map_tiles(lambda *xs: _slope_hpl_body(*xs, lambda_table), (g, sigma_m, valid),
+                     g.shape[:-2], tile=SLOPE_TILE)
 
 
 def slopes(g, sigma_m, valid=None) -> Slopes:
@@ -185,7 +185,7 @@ def slopes(g, sigma_m, valid=None) -> Slopes:
       such a geometry gets ``Status.INVALID_INPUT`` (slopes and maximum inf) instead.
     """
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
-    return _named_invalid_input(_slopes_chunked(g, sigma_m, valid), g, sigma_m, valid)
+    return _named_invalid_input(_slopes_tiled(g, sigma_m, valid), g, sigma_m, valid)
 
 
 def _named_invalid_input(result, g, sigma_m, valid):
@@ -228,5 +228,5 @@ def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
     g, sigma_m, valid = _prepare(g, sigma_m, valid)
     n_sources = g.shape[-2]
     table = lambda_det_table(p_fa, p_md, max(n_sources - N_STATES, 1))
-    return _named_invalid_input(slope_hpl_chunked(g, sigma_m, valid, jnp.asarray(table)),
+    return _named_invalid_input(slope_hpl_tiled(g, sigma_m, valid, jnp.asarray(table)),
                                 g, sigma_m, valid)

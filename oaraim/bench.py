@@ -16,7 +16,7 @@ import numpy as np
 
 from oaraim import geometry, reference, reference_mhss
 from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import slope_hpl_chunked
+from oaraim.araim.slopes import slope_hpl_tiled
 
 
 def host_info() -> dict:
@@ -66,7 +66,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
     sigma = jnp.ones(g.shape[:-1])
     valid = jnp.ones(g.shape[:-1], bool)
     table = jnp.asarray(lambda_det_table(1e-5, 1e-3, 5))
-    run = lambda: slope_hpl_chunked(g, sigma, valid, table).hpl_m.block_until_ready()  # noqa: E731
+    run = lambda: slope_hpl_tiled(g, sigma, valid, table).hpl_m.block_until_ready()  # noqa: E731
     run()  # compile
     t = _best_time(run, repeats)
     out = {"batch": batch, "jax_s": t, "jax_hpl_per_s": batch / t, "host": host_info()}
@@ -78,7 +78,7 @@ def bench_slope_hpl(batch=262_144, ref_geometries=2_000, repeats=5):
 
     hpl_ref = np.array(run_ref())
     t_ref = _best_time(run_ref, SLOPE_REFERENCE_REPEATS)
-    hpl_jax = np.asarray(slope_hpl_chunked(g[:ref_geometries], sigma[:ref_geometries],
+    hpl_jax = np.asarray(slope_hpl_tiled(g[:ref_geometries], sigma[:ref_geometries],
                                             valid[:ref_geometries], table).hpl_m)
     out.update(reference_geometries=ref_geometries, reference_repeats=SLOPE_REFERENCE_REPEATS,
                reference_s=t_ref,
@@ -217,9 +217,9 @@ def profile_mhss(batch=65_536, repeats=3):
     """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding, in CPU
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
     from oaraim import araim
-    from oaraim.araim.batching import jit_kernel, map_chunks
     from oaraim.araim.fault_modes import FaultModeRule, fault_modes_batch_last
     from oaraim.araim.mhss import PL_ITERATIONS, batch_last_inputs, pls_from_projection, project
+    from oaraim.batching import jit_kernel, map_tiles
 
     GROUPED = FaultModeRule("grouped")  # the Table I case's convention (``MHSS_CASES``)
 
@@ -241,7 +241,7 @@ def profile_mhss(batch=65_536, repeats=3):
                     out = pls_from_projection(pr, budget, PL_ITERATIONS)[0]
             return jnp.moveaxis(out, -1, 0)
 
-        f = jit_kernel(lambda *xs: map_chunks(kernel, xs, (batch,)))
+        f = jit_kernel(lambda *xs: map_tiles(kernel, xs, (batch,)))
         jax.block_until_ready(f(*arrays))
         best = np.inf
         for _ in range(repeats):  # CPU time: steadier than wall time on a shared machine

@@ -2,11 +2,11 @@
 
 The Table I bench case (9 GPS + 4 BPP SOPs, ``grouped``, order 1; ``bench.mhss_bench_inputs``)
 through ``araim.protection_levels_kernel`` inside one ``jit_kernel`` program each (the
-kernels' compiler options, one host thread): the HPLs alone (the kernel's own chunks), and
+kernels' compiler options, one host thread): the HPLs alone (the kernel's own tiles), and
 ``jax.value_and_grad`` of the sum of the finite HPLs with respect to every real input (the
 line-of-sight rows, both variances, b_nom, P_s and P_const), which, the geometries being
-independent, is every geometry's HPL and its gradient; taken per chunk of 128 geometries
-inside a ``lax.map`` over the chunks (the pattern docs/gradients.md recommends for large
+independent, is every geometry's HPL and its gradient; taken per tile of 128 geometries
+inside a ``lax.map`` over the tiles (the pattern docs/gradients.md recommends for large
 batches). The PL roots are differentiated by the implicit function theorem
 (``araim.mhss.implicit``) and the fault modes' least squares by their closed-form tangent
 (``araim.mhss.tangent``), so the gradient costs the transposed rules and two evaluations of
@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import araim
-from oaraim.araim.batching import CHUNK, jit_kernel
+from oaraim.batching import TILE, jit_kernel
 from oaraim.bench import host_info, mhss_bench_inputs
 
 #: the differentiated inputs (``araim.Sources`` fields, and P_const)
@@ -31,9 +31,9 @@ GRAD_INPUTS = ("g", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const")
 def bench_gradient(batch: int = 16_384, repeats: int = 3) -> dict:
     """HPLs per second, value alone and value with its gradient (best of ``repeats`` after a
     compiling call), their cost ratio, and the compile times; a JSON-able dict. ``batch`` a
-    multiple of ``araim.batching.CHUNK`` (128): the gradient is taken chunk by chunk."""
-    if batch % CHUNK:
-        raise ValueError(f"batch must be a multiple of {CHUNK}, got {batch}")
+    multiple of ``oaraim.batching.TILE`` (128): the gradient is taken tile by tile."""
+    if batch % TILE:
+        raise ValueError(f"batch must be a multiple of {TILE}, got {batch}")
     x = mhss_bench_inputs(batch, seed=11)
     budget = araim.BUDGET_SEED004_TABLE_I
     fixed = {k: x[k] for k in ("constellation", "valid")}
@@ -48,15 +48,15 @@ def bench_gradient(batch: int = 16_384, repeats: int = 3) -> dict:
         h = hpl(p, fixed)
         return jnp.sum(jnp.where(jnp.isfinite(h), h, 0.0)), h
 
-    grad_chunk = jax.value_and_grad(total, has_aux=True)
+    grad_tile = jax.value_and_grad(total, has_aux=True)
 
     def value_and_grad(p):
-        # differentiate inside each chunk and loop over the chunks outside: reverse mode
-        # through the kernel's own loop over chunks (``lax.map``) stores and replays every
-        # chunk's residuals, measured 16x the value's cost at 4,096 geometries against 3.8x
+        # differentiate inside each tile and loop over the tiles outside: reverse mode
+        # through the kernel's own loop over tiles (``lax.map``) stores and replays every
+        # tile's residuals, measured 16x the value's cost at 4,096 geometries against 3.8x
         # this way (docs/gradients.md)
-        chunks = jax.tree.map(lambda a: a.reshape((-1, CHUNK) + a.shape[1:]), (p, fixed))
-        (_, h), g = jax.lax.map(lambda c: grad_chunk(*c), chunks)
+        tiles = jax.tree.map(lambda a: a.reshape((-1, TILE) + a.shape[1:]), (p, fixed))
+        (_, h), g = jax.lax.map(lambda c: grad_tile(*c), tiles)
         return h.reshape(-1), jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), g)
 
     value = jit_kernel(hpl)

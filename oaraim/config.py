@@ -15,7 +15,7 @@ DEFAULT_THREADS = 2
 
 
 def default_threads() -> int:
-    """Host threads over which a large batch is split (``araim.batching.map_threads``) and over
+    """Host threads over which a large batch is split (``oaraim.batching.map_threads``) and over
     which an in-process sweep computes chunks side by side (``mc.sweep.run_sweep``):
     ``OARAIM_THREADS``, else ``DEFAULT_THREADS`` (2). ``OARAIM_THREADS=1`` turns the split off.
     Results never depend on it.

@@ -30,7 +30,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
-from oaraim.araim.batching import jit_kernel
+from oaraim.batching import jit_kernel
 from oaraim.mc.checkpoint import counted_unit
 from oaraim.mc.keys import realization_keys
 from oaraim.studies.base import Param, ResumableStudy, axis, count, positive, probability

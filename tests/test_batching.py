@@ -1,4 +1,4 @@
-"""araim.batching.map_threads on a trivial kernel: the in-program part slices, the padding,
+"""oaraim.batching.map_threads on a trivial kernel: the in-program part slices, the padding,
 the kept thread pools and a nested call (a part that splits again must not wait for a pool
 thread it occupies itself)."""
 
@@ -8,18 +8,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim.araim.batching import map_chunks, map_threads, slice_rows
+from oaraim.batching import map_threads, map_tiles, slice_rows
 
-CHUNK = 8
+TILE = 8
 
 
 def _kernel(x, y):
     return {"sum": x[:, 0] + y, "prod": x * y[:, None]}
 
 
-_fn = jax.jit(lambda x, y: map_chunks(_kernel, (x, y), (x.shape[0],), chunk=CHUNK))
-_part_fn = jax.jit(lambda start, x, y, size: map_chunks(
-    _kernel, slice_rows((x, y), start, size), (size,), chunk=CHUNK), static_argnames="size")
+_fn = jax.jit(lambda x, y: map_tiles(_kernel, (x, y), (x.shape[0],), tile=TILE))
+_part_fn = jax.jit(lambda start, x, y, size: map_tiles(
+    _kernel, slice_rows((x, y), start, size), (size,), tile=TILE), static_argnames="size")
 
 
 def _inputs(n):
@@ -32,37 +32,37 @@ def _part(start, size, x, y):
 
 
 def test_parts_sliced_in_program_equal_one_call():
-    for n, threads in ((5 * CHUNK + 3, 2), (9 * CHUNK, 3), (4 * CHUNK, 2), (CHUNK + 1, 2)):
+    for n, threads in ((5 * TILE + 3, 2), (9 * TILE, 3), (4 * TILE, 2), (TILE + 1, 2)):
         x, y = _inputs(n)
         want = _fn(x, y)
         for part_fn in (None, _part):
-            got = map_threads(_fn, (x, y), (n,), threads, chunk=CHUNK, part_fn=part_fn)
+            got = map_threads(_fn, (x, y), (n,), threads, tile=TILE, part_fn=part_fn)
             for k in want:
                 assert got[k].shape == want[k].shape
                 assert np.array_equal(np.asarray(got[k]), np.asarray(want[k])), (n, threads, k)
 
 
 def test_batch_shape_is_restored():
-    x, y = _inputs(6 * CHUNK)
+    x, y = _inputs(6 * TILE)
     got = map_threads(lambda a, b: _fn(a.reshape(-1, 3), b.reshape(-1)),
-                      (x.reshape(2, 3 * CHUNK, 3), y.reshape(2, 3 * CHUNK)), (2, 3 * CHUNK), 2,
-                      chunk=CHUNK, part_fn=_part)
-    assert got["sum"].shape == (2, 3 * CHUNK) and got["prod"].shape == (2, 3 * CHUNK, 3)
+                      (x.reshape(2, 3 * TILE, 3), y.reshape(2, 3 * TILE)), (2, 3 * TILE), 2,
+                      tile=TILE, part_fn=_part)
+    assert got["sum"].shape == (2, 3 * TILE) and got["prod"].shape == (2, 3 * TILE, 3)
     np.testing.assert_array_equal(np.asarray(got["sum"]).ravel(), np.asarray(_fn(x, y)["sum"]))
 
 
 def test_nested_split_runs_without_waiting_for_itself():
     """Both pool threads busy with parts whose kernel splits again: the inner split runs its
     parts in the calling thread (a shared pool of 2 would otherwise deadlock)."""
-    x, y = _inputs(8 * CHUNK)
+    x, y = _inputs(8 * TILE)
 
     def outer_part(start, size, x, y):
         xs, ys = x[start:start + size], y[start:start + size]
-        return map_threads(_fn, (xs, ys), (size,), 2, chunk=CHUNK, part_fn=_part)
+        return map_threads(_fn, (xs, ys), (size,), 2, tile=TILE, part_fn=_part)
 
     result = {}
     t = threading.Thread(target=lambda: result.setdefault("out", map_threads(
-        _fn, (x, y), (8 * CHUNK,), 2, chunk=CHUNK, part_fn=outer_part)))
+        _fn, (x, y), (8 * TILE,), 2, tile=TILE, part_fn=outer_part)))
     t.start()
     t.join(60)
     assert not t.is_alive(), "nested map_threads deadlocked"

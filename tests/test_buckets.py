@@ -1,4 +1,4 @@
-"""Shape buckets and the single-dispatch path of the host wrappers (araim.batching.bucket,
+"""Shape buckets and the single-dispatch path of the host wrappers (oaraim.batching.bucket,
 araim.protection_levels): arbitrary batch sizes share a few compiled programs, padding changes
 no bit, and max_order=None decided inside the kernel equals required_order's choice."""
 
@@ -7,8 +7,8 @@ import pytest
 
 from oaraim import araim
 from oaraim.araim import mhss
-from oaraim.araim.batching import CHUNK, bucket
 from oaraim.araim.fault_modes import fault_mode_rule, to_batch_last
+from oaraim.batching import TILE, bucket
 from oaraim.bench import mhss_bench_inputs
 
 KEYS = ("g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat", "p_const",
@@ -17,16 +17,16 @@ BUDGET = araim.BUDGET_SEED004_TABLE_I
 
 
 def test_bucket_sizes_by_hand():
-    """1, 4, 16, 64, one chunk; then m chunks, m = 2, 3 and {4, 5, 6, 7} x 2^k."""
-    assert CHUNK == 128
+    """1, 4, 16, 64, one tile; then m tiles, m = 2, 3 and {4, 5, 6, 7} x 2^k."""
+    assert TILE == 128
     want = {0: 0, 1: 1, 2: 4, 4: 4, 5: 16, 16: 16, 17: 64, 64: 64, 65: 128, 128: 128,
             129: 256, 256: 256, 257: 384, 385: 512, 512: 512, 513: 640, 897: 1024,
             1025: 1280, 1281: 1536, 1537: 1792, 1793: 2048, 2049: 2560, 65_536: 65_536,
             65_537: 81_920}
     assert {n: bucket(n) for n in want} == want
-    for n in range(CHUNK + 1, 40 * CHUNK, 37):  # above one chunk: at most 25 % padding
+    for n in range(TILE + 1, 40 * TILE, 37):  # above one tile: at most 25 % padding
         b = bucket(n)
-        assert b % CHUNK == 0 and n <= b <= 1.25 * n + CHUNK, n
+        assert b % TILE == 0 and n <= b <= 1.25 * n + TILE, n
 
 
 @pytest.fixture(scope="module")

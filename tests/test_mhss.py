@@ -923,11 +923,11 @@ def test_solve_pl_fast_path_and_fallback_bracket_the_root():
 def test_bench_case_is_proved_by_the_taylor_step():
     """The fast path's reason to exist: on the issue-3 benchmark case (9 GPS + 4 SOPs, Table I)
     the Taylor proof of the two Halley steps alone settles the PL equations, so the probe loop
-    and the bracketed branch stay idle in (almost) every chunk. With both disabled (no probe
+    and the bracketed branch stay idle in (almost) every tile. With both disabled (no probe
     round, bracketed solver returning NaN), at most 1 of 4096 geometries is NOT_CONVERGED
     (measured: 1 of 65,536 at seed 0, where the first Halley step was 7e-3 m off)."""
-    from oaraim.araim.batching import jit_kernel
     from oaraim.araim.mhss import Sources, protection_levels_kernel, root
+    from oaraim.batching import jit_kernel
     from oaraim.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(4096, seed=3)
@@ -948,23 +948,23 @@ def test_bench_case_is_proved_by_the_taylor_step():
 
 
 def test_threaded_split_is_bit_identical_to_one_call():
-    """araim.batching.map_threads: parts of whole chunks on host threads give exactly the bits
+    """oaraim.batching.map_threads: parts of whole tiles on host threads give exactly the bits
     of one call, for a batch that splits unevenly into 2 or 3 parts, and one that is not split
-    (fewer than 2 chunks per thread)."""
-    from oaraim.araim.batching import CHUNK
+    (fewer than 2 tiles per thread)."""
     from oaraim.araim.mhss import prepare_inputs, protection_levels_threaded
+    from oaraim.batching import TILE
     from oaraim.bench import mhss_bench_inputs
 
-    x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)
+    x = mhss_bench_inputs(6 * TILE + 37, seed=5)
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I
     one = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
-    # shapes compiled: 1573 (one call), 1024 (2 parts of 4 chunks), 768 (3 parts of 3 chunks,
-    # and the unsplit 3-chunk batch)
-    for n, threads in ((6 * CHUNK + 37, 2), (6 * CHUNK + 37, 3), (3 * CHUNK, 2)):
+    # shapes compiled: 1573 (one call), 1024 (2 parts of 4 tiles), 768 (3 parts of 3 tiles,
+    # and the unsplit 3-tile batch)
+    for n, threads in ((6 * TILE + 37, 2), (6 * TILE + 37, 3), (3 * TILE, 2)):
         part = tuple(a[:n] for a in args)
-        ref = one if n == 6 * CHUNK + 37 else protection_levels_threaded(
+        ref = one if n == 6 * TILE + 37 else protection_levels_threaded(
             part, budget, 1, threads=1, fault_modes=GROUPED)
         got = protection_levels_threaded(part, budget, 1, threads=threads,
                                          fault_modes=GROUPED)
@@ -972,7 +972,7 @@ def test_threaded_split_is_bit_identical_to_one_call():
             assert a.shape == b.shape and np.array_equal(np.asarray(a), np.asarray(b)), name
     assert np.all(np.isfinite(np.asarray(one.hpl_m)))
     # inside a caller's jit the split is skipped (threads cannot share a trace): same bits
-    part = args  # 7 chunks: split into 2 parts were it not traced
+    part = args  # 7 tiles: split into 2 parts were it not traced
     jitted = jax.jit(lambda *a: protection_levels(*a[:7], budget, a[7], max_order=1,
                                                         threads=2).hpl_m)(*part)
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(one.hpl_m), rtol=1e-12)
@@ -984,29 +984,29 @@ def test_threaded_split_is_bit_identical_to_one_call():
     for name, a, b in zip(public._fields, public, one, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name
     bad = np.array(args[3])
-    bad[6 * CHUNK + 3, 2] = -1.0
+    bad[6 * TILE + 3, 2] = -1.0
     with pytest.raises(ValueError, match="var_acc_m2"):
         protection_levels(*args[:3], bad, *args[4:7], budget, args[7], max_order=1,
                                 threads=2)
 
 
 def test_kernel_compiler_options_change_no_bit():
-    """araim.batching.KERNEL_COMPILER_OPTIONS (512-bit vectors) change speed only: the kernel
+    """oaraim.batching.KERNEL_COMPILER_OPTIONS (512-bit vectors) change speed only: the kernel
     compiled with them gives exactly the bits of XLA's default options (the bench case, at the
     shape and seed of the threaded test above, whose compiled kernel it reuses). Checked once
     beyond this: the 2000 random geometries of ``random_cases`` at orders 1, 2 and
     3 (whole, single and generic modes) and the FDE functions, all bit-identical."""
-    from oaraim.araim.batching import CHUNK, KERNEL_COMPILER_OPTIONS
     from oaraim.araim.mhss import (
         Sources,
         prepare_inputs,
         protection_levels_kernel,
         protection_levels_threaded,
     )
+    from oaraim.batching import KERNEL_COMPILER_OPTIONS, TILE
     from oaraim.bench import mhss_bench_inputs
 
     assert KERNEL_COMPILER_OPTIONS  # else this compares a kernel with itself
-    x = mhss_bench_inputs(6 * CHUNK + 37, seed=5)
+    x = mhss_bench_inputs(6 * TILE + 37, seed=5)
     args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
                           x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
     budget = araim.BUDGET_SEED004_TABLE_I

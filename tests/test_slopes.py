@@ -220,14 +220,14 @@ def test_batch_shape_invariance(oracle_cases):
         np.testing.assert_allclose(b, a, rtol=1e-15, atol=0, err_msg=name)
 
 
-def test_chunked_batch_equals_the_unchunked_kernel():
-    """``slope_hpl`` evaluates batches larger than ``SLOPE_CHUNK`` in chunks (padding the last
-    with a real geometry): every output equals the unchunked kernel's within 1e-12 relative,
+def test_tiled_batch_equals_the_untiled_kernel():
+    """``slope_hpl`` evaluates batches larger than ``SLOPE_TILE`` in tiles (padding the last
+    with a real geometry): every output equals the untiled kernel's within 1e-12 relative,
     failures included, and a nested batch shape comes back."""
     import importlib
 
     slopes_mod = importlib.import_module("oaraim.araim.slopes")
-    n = 2 * slopes_mod.SLOPE_CHUNK + 5
+    n = 2 * slopes_mod.SLOPE_TILE + 5
     g, sigma, valid = _random_geometries(11, n)
     valid[::97] = False  # too few sources: inf with a status
     table = np.asarray(araim.lambda_det_table(1e-5, 1e-3, L_BIG - 4))

@@ -20,10 +20,10 @@ import pytest
 
 from oaraim import araim
 from oaraim.araim import linalg
-from oaraim.araim.batching import jit_kernel
 from oaraim.araim.fault_modes import fault_mode_rule, select_fault_modes
 from oaraim.araim.mhss.entry import batch_last_inputs
 from oaraim.araim.mhss.projection import int_weighted_modes
+from oaraim.batching import jit_kernel
 from oaraim.bench import mhss_bench_inputs
 
 BUDGET = araim.BUDGET_SEED004_TABLE_I

@@ -46,15 +46,16 @@ LAYERS = {
     "root": {"constants", "config"},            # oaraim/__init__, the compilation cache
     "constants": set(),                         # oaraim.constants: every physical constant
     "config": set(),                            # oaraim.config: settings read by several layers
+    "batching": {"config"},                     # oaraim.batching: tiles, buckets, threads, stores
     "oracles": set(),                           # oaraim.reference*: NumPy/SciPy only
-    "geometry": {"constants"},
-    "araim": {"geometry", "constants", "config"},
+    "geometry": {"constants", "batching"},
+    "araim": {"geometry", "constants", "config", "batching"},
     "mc": {"config"},
-    "sim": {"araim", "geometry", "constants", "mc"},  # mc: the named key streams
+    "sim": {"araim", "geometry", "constants", "mc", "batching"},  # mc: the named key streams
     "data": {"geometry"},                       # oaraim.data: the real files, checked
-    "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config"},
+    "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config", "batching"},
     "app": {"studies", "araim", "geometry", "mc", "sim", "data", "constants", "config",
-            "oracles"},                         # cli, execute, registry, report, bench
+            "oracles", "batching"},                         # cli, execute, registry, report, bench
 }
 _SUBPACKAGE_LAYERS = ("geometry", "araim", "mc", "sim", "studies")
 
@@ -66,7 +67,7 @@ def layer_of(module: str) -> str:
         return "root"
     if parts[1] in _SUBPACKAGE_LAYERS:
         return parts[1]
-    if parts[1] in ("constants", "config", "data"):
+    if parts[1] in ("constants", "config", "data", "batching"):
         return parts[1]
     if parts[1].startswith("reference"):
         return "oracles"

@@ -3,7 +3,7 @@
 ``protection_levels`` (NumPy input, argument checks with clear errors, batch-size buckets,
 host threads) over the same compiled kernel. The kernel composes ``project`` (fault modes and
 projectors), ``pls_from_projection`` (the PL root finder) and, on request, the Blanch et al.
-(2015) all-in-view estimator (``araim.position_opt``), chunk by chunk (``araim.batching``)."""
+(2015) all-in-view estimator (``araim.position_opt``), tile by tile (``oaraim.batching``)."""
 
 import functools
 from typing import NamedTuple
@@ -13,17 +13,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import (
-    CHUNK,
-    bucket,
-    is_traced,
-    jit_kernel,
-    map_chunks,
-    map_threads,
-    pad_rows,
-    slice_rows,
-    unpad,
-)
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
@@ -55,6 +44,17 @@ from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.position_opt import check_position_optimization
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
+from oaraim.batching import (
+    TILE,
+    bucket,
+    is_traced,
+    jit_kernel,
+    map_threads,
+    map_tiles,
+    pad_rows,
+    slice_rows,
+    unpad,
+)
 
 __all__ = ["MHSSResult", "batch_last_inputs", "kernel_cache_size", "protection_levels",
            "protection_levels_kernel", "protection_levels_priors_kernel",
@@ -96,8 +96,8 @@ def batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
             tl(p_sat, 1), tl(p_const, 1), tl(valid, 1))
 
 
-#: geometries of a chunk that ``_optimized_position`` solves a second time in a compact
-#: sub-batch; a chunk with more triggered geometries solves the whole chunk again
+#: geometries of a tile that ``_optimized_position`` solves a second time in a compact
+#: sub-batch; a tile with more triggered geometries solves the whole tile again
 OPTIMIZED_SUBBATCH = 16
 
 
@@ -107,11 +107,11 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
     kept (PLs, EMT and sigma_acc together) where its VPL or HPL is lower. Returns (pl,
     status, emt, sigma_acc_u, adjusted).
 
-    The second solve runs only where a chunk has triggered geometries (``lax.switch``): on
+    The second solve runs only where a tile has triggered geometries (``lax.switch``): on
     up to ``OPTIMIZED_SUBBATCH`` of them gathered into a compact sub-batch (a world map
-    triggers on ~0-1 % of its geometries, so most chunks that trigger at all hold one or
-    two), else on the whole chunk. Every step is elementwise along the batch, so a geometry
-    gets the same bits either way (tested on chunks of 64; XLA may round the lanes past the
+    triggers on ~0-1 % of its geometries, so most tiles that trigger at all hold one or
+    two), else on the whole tile. Every step is elementwise along the batch, so a geometry
+    gets the same bits either way (tested on tiles of 64; XLA may round the lanes past the
     last full vector of a batch differently, so a batch of at most ``OPTIMIZED_SUBBATCH``
     geometries is always solved whole)."""
     ok = status == Status.OK
@@ -125,7 +125,7 @@ def _optimized_position(pr, pl, status, emt, args, budget, iterations, opt):
 
     def rows(pr):
         """S^(i) built inside the branch that reads it (``project(lazy_rows=True)``), from
-        the whole chunk's pieces: the same bits as building it for every chunk."""
+        the whole tile's pieces: the same bits as building it for every tile."""
         return pr._replace(s_pos=position_rows(pr), rows=None)
 
     def solve(pr, pl, emt, args, trigger):
@@ -212,7 +212,7 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
                        input_flags=False, fault_modes=DEFAULT_RULE,
                        position_optimization=None, order_flags=False):
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
-    cache-sized chunks (``araim.batching``). ``input_flags`` also returns ``invalid_input_flags``
+    cache-sized tiles (``oaraim.batching``). ``input_flags`` also returns ``invalid_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
     arrays, batch = broadcast_batch(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
                                     valid)
@@ -222,7 +222,7 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
                                        iterations, input_flags, fault_modes,
                                        position_optimization, order_flags)
 
-    return map_chunks(kernel, arrays, batch)
+    return map_tiles(kernel, arrays, batch)
 
 
 _STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags",
@@ -235,7 +235,7 @@ def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_w
                             fault_modes=DEFAULT_RULE, position_optimization=None,
                             order_flags=False):
     """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
-    program (``araim.batching.map_threads``'s ``part_fn``)."""
+    program (``oaraim.batching.map_threads``'s ``part_fn``)."""
     return _protection_levels(*slice_rows(args, start, size), budget, max_order,
                               all_in_view_weighting, iterations, input_flags, fault_modes,
                               position_optimization, order_flags)
@@ -247,7 +247,7 @@ _protection_levels_part_jit = jit_kernel(_protection_levels_part,
 
 def kernel_cache_size():
     """How many programs the host wrapper's kernel (``protection_levels`` on a whole batch) has
-    compiled in this process: one per batch-size bucket (``araim.batching.bucket``) and static
+    compiled in this process: one per batch-size bucket (``oaraim.batching.bucket``) and static
     setting. Tests use it to check that arbitrary batch sizes share the bucket programs."""
     return _protection_levels_jit.jitted._cache_size()
 
@@ -347,7 +347,7 @@ def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, f
     geo = [jnp.broadcast_to(x, batch + s) for x, s in (
         (g, (L, 3)), (sources.constellation, (L,)), (sources.var_int_m2, (L,)),
         (sources.var_acc_m2, (L,)), (sources.b_nom_m, (L,)), (sources.valid, (L,)))]
-    # the set axis after the batch axes, so that the chunks (araim.batching) cut the batch
+    # the set axis after the batch axes, so that the tiles (oaraim.batching) cut the batch
     sets = [jnp.moveaxis(jnp.broadcast_to(x, (n_sets,) + batch + s), 0, len(batch))
             for x, s in ((sources.p_sat, (L,)), (p_const, (C,)))]
 
@@ -355,7 +355,7 @@ def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, f
         return _priors_flat(*xs, budget, max_order, all_in_view_weighting, iterations,
                             fault_modes)
 
-    out = map_chunks(kernel, geo + sets, batch)  # (..., P, ...)
+    out = map_tiles(kernel, geo + sets, batch)  # (..., P, ...)
     return MHSSResult(*(jnp.moveaxis(x, len(batch), 0) for x in out))
 
 
@@ -413,7 +413,7 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
       all_in_view_weighting: "int" (C_int^-1, ADD/MAAST, default) or "acc" (seed 004 after
         eq. 5).
       threads: host threads over which a large batch is split (default
-        ``araim.batching.default_threads()``: ``OARAIM_THREADS`` or 2); results do not depend
+        ``oaraim.batching.default_threads()``: ``OARAIM_THREADS`` or 2); results do not depend
         on it.
       fault_modes: the fault-mode convention, a name or ``araim.FaultModeRule``: ``add-v4.2``
         (default, the current ADD), ``add-v3``, ``add-v3-consolidated``, ``blanch-2012``,
@@ -449,7 +449,7 @@ def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, 
     static = dict(budget=budget, all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
                   position_optimization=opt)
     res = None
-    if max_order is None and flat[0].shape[0] <= CHUNK:
+    if max_order is None and flat[0].shape[0] <= TILE:
         # one dispatch for a small batch: the kernel at order 1 also says, by the test of
         # required_order, whether any geometry needs more (then the batch runs again there)
         res, flags, more = _protection_levels_jit.jitted(*flat, max_order=1, input_flags=True,
@@ -494,7 +494,7 @@ def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="i
                                threads=None, input_flags=False, fault_modes=DEFAULT_RULE,
                                position_optimization=None):
     """The jitted kernel on ``prepare_inputs`` output, large batches split over host threads
-    (``araim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores).
+    (``oaraim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores).
     ``input_flags``: returns (MHSSResult, ``invalid_input_flags``)."""
     static = dict(budget=budget, max_order=max_order,
                   all_in_view_weighting=all_in_view_weighting, input_flags=input_flags,

@@ -101,7 +101,7 @@ INPUT_RANGES = {"var_int_m2": (0.0, False, np.inf), "var_acc_m2": (0.0, False, n
 
 def broadcast_batch(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid):
     """The eight kernel inputs broadcast to g's batch shape (``(..., L, 3)``, ``(..., L)``,
-    ``(..., C)``), as the list ``araim.batching.map_chunks`` takes, and that batch shape."""
+    ``(..., C)``), as the list ``oaraim.batching.map_tiles`` takes, and that batch shape."""
     batch = g.shape[:-2]
     L, C = g.shape[-2], p_const.shape[-1]
     arrays = [jnp.broadcast_to(x, batch + s) for x, s in (

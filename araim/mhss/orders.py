@@ -9,7 +9,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim.araim.batching import CHUNK, map_chunks
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     event_modes_batch_last,
@@ -18,6 +17,7 @@ from oaraim.araim.fault_modes import (
     group_probabilities,
     to_batch_last,
 )
+from oaraim.batching import TILE, map_tiles
 
 __all__ = ["MAX_AUTO_ORDER", "higher_order_flags", "required_order"]
 
@@ -96,8 +96,8 @@ def higher_order_flags(valid, constellation, p_sat, p_const, budget, rule, order
 def _needs_higher_order(valid, constellation, p_sat, p_const, budget, rule, order):
     """Whether any geometry of the batch needs a template above ``order`` (event rules)."""
     batch = valid.shape[:-1]
-    flags = map_chunks(functools.partial(_needs_flat, budget=budget, rule=rule, order=order),
-                       (valid, constellation, p_sat, p_const), batch, chunk=4 * CHUNK)
+    flags = map_tiles(functools.partial(_needs_flat, budget=budget, rule=rule, order=order),
+                      (valid, constellation, p_sat, p_const), batch, tile=4 * TILE)
     return jnp.any(flags)
 
 
@@ -110,11 +110,11 @@ def _tails_flat(valid, constellation, p_sat, p_const, r_max):
 
 @functools.partial(jax.jit, static_argnames="r_max")
 def _worst_tails(valid, constellation, p_sat, p_const, r_max):
-    """The batch's largest ``_tails_flat`` per order, (r_max,): one compiled program in chunks
+    """The batch's largest ``_tails_flat`` per order, (r_max,): one compiled program in tiles
     (docs/benchmarks.md)."""
     batch = valid.shape[:-1]
-    tails = map_chunks(functools.partial(_tails_flat, r_max=r_max),
-                       (valid, constellation, p_sat, p_const), batch, chunk=16 * CHUNK)
+    tails = map_tiles(functools.partial(_tails_flat, r_max=r_max),
+                      (valid, constellation, p_sat, p_const), batch, tile=16 * TILE)
     return jnp.max(tails.reshape(-1, r_max), axis=0)
 
 

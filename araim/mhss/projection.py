@@ -93,7 +93,7 @@ class ModeRows(NamedTuple):
     ``u_pos`` (L, 3, B), ``c`` (L, L, B), ``ok`` (L, B)), ``tail`` (the modes after them) and
     ``usable`` (K, B), the modes kept. Built where it is read (``position_rows``) from the
     same stored pieces as the full array would be, so it has the same bits (tested on 828
-    outputs): the MAAST estimator's branch reads S^(i), and building it for every chunk
+    outputs): the MAAST estimator's branch reads S^(i), and building it for every tile
     was 0.85 of 11.4 us per geometry of the 1 x 1 deg map kernel."""
 
     head: tuple

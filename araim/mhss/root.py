@@ -350,7 +350,7 @@ def solve_pl(coef, mean, sd, rhs, iterations=PL_ITERATIONS, start=None, ignore=N
     Dl(pl) >= rhs with Dl a lower bound of the slope on [pl - tol, pl], ``risk_lower_slope``),
     the first at x2, the next ones a Newton step from the last probe (a loop that ends at once
     when every element is proved). What is still not proved is solved by the bracketed solver,
-    in a branch taken only when a chunk has such an element (``jax.lax.cond``). Each element's
+    in a branch taken only when a tile has such an element (``jax.lax.cond``). Each element's
     result depends on its own terms only, never on the rest of the batch.
 
     ``start``: the starting point, max_j mean_j + sd_j ``_fast_start_factor``_j (about the

@@ -25,13 +25,13 @@ such gradients apart. Bits of the returned int8 (``SWITCH_*``):
 import jax.numpy as jnp
 
 from oaraim.araim import linalg
-from oaraim.araim.batching import jit_kernel, map_chunks
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import check_order, fault_mode_rule, select_fault_modes
 from oaraim.araim.mhss.entry import batch_last_inputs
 from oaraim.araim.mhss.inputs import Sources, broadcast_batch, check_options
 from oaraim.araim.mhss.projection import project
 from oaraim.araim.validate import check_int
+from oaraim.batching import jit_kernel, map_tiles
 
 __all__ = ["SINGULAR_BAND", "SWITCH_EMT", "SWITCH_MODE_SET", "SWITCH_RTOL", "SWITCH_SINGULAR",
            "SWITCH_UNMONITORED", "switch_flags_kernel"]
@@ -115,7 +115,7 @@ def _switch_flags(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, val
     def kernel(*xs):
         return _flags_flat(*xs, budget, max_order, all_in_view_weighting, rule, rtol, band)
 
-    return map_chunks(kernel, arrays, batch)
+    return map_tiles(kernel, arrays, batch)
 
 
 _switch_flags_jit = jit_kernel(_switch_flags, static_argnames=(

@@ -37,12 +37,12 @@ import xarray as xr
 from oaraim import geometry
 from oaraim.araim import availability as av
 from oaraim.araim import linalg
-from oaraim.araim.batching import jit_kernel, map_chunks
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
 from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.araim.status import Status
+from oaraim.batching import jit_kernel, map_tiles
 from oaraim.geometry.ephemeris import GALILEO, GPS
 from oaraim.geometry.sky import azimuth, elevation, line_of_sight
 from oaraim.mc.sweep import Values
@@ -152,24 +152,24 @@ def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, ma
                gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
                requirements, fault_modes="add-v4.2", airborne_model="add",
                position_optimization=None):
-    """``_map_chunk`` over ``idx`` (B,) in chunks of ``araim.batching.CHUNK`` realizations
+    """``_map_tile`` over ``idx`` (B,) in tiles of ``oaraim.batching.TILE`` realizations
     (one compiled loop body): a realization's bits do not depend on how many are computed in
     one call."""
-    def chunk(i):
-        return _map_chunk(i, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const,
-                          mask_rad, gnss, sop, towers, p_const, n_slots=n_slots, n_sops=n_sops,
-                          bpp=bpp, max_order=max_order, budget=budget,
-                          requirements=requirements, fault_modes=fault_modes,
-                          airborne_model=airborne_model,
-                          position_optimization=position_optimization)
+    def tile(i):
+        return _map_tile(i, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const,
+                         mask_rad, gnss, sop, towers, p_const, n_slots=n_slots, n_sops=n_sops,
+                         bpp=bpp, max_order=max_order, budget=budget,
+                         requirements=requirements, fault_modes=fault_modes,
+                         airborne_model=airborne_model,
+                         position_optimization=position_optimization)
 
-    return map_chunks(chunk, [idx], idx.shape)
+    return map_tiles(tile, [idx], idx.shape)
 
 
-def _map_chunk(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
-               gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-               requirements, fault_modes="add-v4.2", airborne_model="add",
-               position_optimization=None):
+def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
+              gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
+              requirements, fault_modes="add-v4.2", airborne_model="add",
+              position_optimization=None):
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV

@@ -39,7 +39,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import geometry, mc
-from oaraim.araim.batching import jit_kernel
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_mode_rule
@@ -49,6 +48,7 @@ from oaraim.araim.mhss import (
     protection_levels_priors_kernel,
     required_order,
 )
+from oaraim.batching import jit_kernel
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
     Param,

@@ -9,11 +9,11 @@ import xarray as xr
 
 from oaraim import araim, mc, sim
 from oaraim.araim import snapshot
-from oaraim.araim.batching import CHUNK
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fde import solution_separation
 from oaraim.araim.mhss import required_order
+from oaraim.batching import TILE
 from oaraim.geometry import epoch_geometry, gpstime
 from oaraim.geometry.recording import load_recording
 from oaraim.studies.base import (
@@ -46,9 +46,9 @@ PUBLISHED_EPOCHS = 2880
 FLIGHT_S = 220.0
 #: epochs per MHSS kernel call (fixed: results do not depend on N or the chunk)
 BLOCK = 480
-#: epochs per detect_and_exclude call: one kernel chunk (``araim.batching.CHUNK``), the shape
+#: epochs per detect_and_exclude call: one kernel tile (``oaraim.batching.TILE``), the shape
 #: its program runs anyway (96 was padded to 128: a third of the exclusion work was padding)
-BLOCK_FDE = CHUNK
+BLOCK_FDE = TILE
 #: the slope-RAIM-only replay of the flight (the solution and the sources used)
 SLOPE_ONLY = snapshot.ReplayConfig(monitors=("slope",))
 #: the realistic world's GNSS period before take-off (t = 0) over which the receiver fits the

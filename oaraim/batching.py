@@ -1,14 +1,24 @@
-"""Run a batch kernel chunk by chunk so its intermediates stay in cache.
+"""The speed helpers every computing layer shares: batch kernels run tile by tile so their
+intermediates stay in cache, batch-size buckets, host threads, the kernels' jit, and the
+stores XLA must not recompute (``materialize``, ``blocks``).
+
+A layer of its own below ``araim`` (docs/design.md: it imports only ``oaraim.config``), so
+that studies, the simulated world and the bench use the same helpers as the receiver
+without reaching into ``araim``. Words: a *tile* is a fixed number of geometries (``TILE``)
+computed by one compiled program inside a kernel call; a *chunk* (``mc``) is a task of
+Monte Carlo realizations, one kernel call or more, one file of a sweep
+(docs/conventions.md).
+
 
 The MHSS kernel holds a few (modes x sources) arrays per geometry; over a large batch each is
-hundreds of MB and the kernel becomes memory-bound. ``lax.map`` over fixed-size chunks of
-``CHUNK`` geometries keeps every intermediate small (a (modes x 3 x sources) array of the
-bench case is 0.6 MB per chunk of 128, a third of a core's 2 MB L2; the chunk sizes measured
-are in docs/benchmarks.md). Batches larger than one chunk are computed in chunks of exactly
+hundreds of MB and the kernel becomes memory-bound. ``lax.map`` over fixed-size tiles of
+``TILE`` geometries keeps every intermediate small (a (modes x 3 x sources) array of the
+bench case is 0.6 MB per tile of 128, a third of a core's 2 MB L2; the tile sizes measured
+are in docs/benchmarks.md). Batches larger than one tile are computed in tiles of exactly
 this shape, so there a geometry's result does not depend on the caller's batch size (XLA
-rounds differently at different shapes); a batch of at most one chunk runs at its own shape.
+rounds differently at different shapes); a batch of at most one tile runs at its own shape.
 Every geometry is computed independently and the padding geometries are dropped, so changing
-``CHUNK`` moves results only by rounding (last bits), never by more.
+``TILE`` moves results only by rounding (last bits), never by more.
 """
 
 import concurrent.futures
@@ -56,8 +66,8 @@ def jit_kernel(fn=None, **kwargs):
     call.jitted = jitted
     return call
 
-#: geometries per chunk
-CHUNK = 128
+#: geometries per tile
+TILE = 128
 
 
 def _flatten(arrays, batch_shape):
@@ -82,29 +92,29 @@ def _unflatten(out, batch_shape, n):
     return jax.tree.map(lambda y: y[:n].reshape(tuple(batch_shape) + y.shape[1:]), out)
 
 
-#: batch sizes below one chunk that the host wrappers compile for (``bucket``)
+#: batch sizes below one tile that the host wrappers compile for (``bucket``)
 SMALL_BUCKETS = (1, 4, 16, 64)
 
 
-def bucket(n, chunk=CHUNK):
+def bucket(n, tile=TILE):
     """The batch size a host wrapper runs ``n`` geometries at: the smallest of 1, 4, 16, 64,
-    ``chunk``, then ``m`` whole chunks with m = 2, 3 or m in {4, 5, 6, 7} x 2^k, that holds n.
+    ``tile``, then ``m`` whole tiles with m = 2, 3 or m in {4, 5, 6, 7} x 2^k, that holds n.
 
     Every new batch shape compiles the kernel again (10-25 s for MHSS); with buckets a user's
-    arbitrary batch sizes share a handful of compiled programs (five up to one chunk, four per
-    doubling above) at most 25 % extra work above one chunk. Batches of one geometry stay
+    arbitrary batch sizes share a handful of compiled programs (five up to one tile, four per
+    doubling above) at most 25 % extra work above one tile. Batches of one geometry stay
     at their own size (the latency of a single call).
     """
     n = int(n)
     if n <= 0:
         return 0
-    if n <= chunk:
-        return next((b for b in SMALL_BUCKETS if n <= b < chunk), chunk)
-    m = -(-n // chunk)
+    if n <= tile:
+        return next((b for b in SMALL_BUCKETS if n <= b < tile), tile)
+    m = -(-n // tile)
     if m > 3:
         step = 1 << (m.bit_length() - 3)  # m in [4 step, 8 step)
         m = -(-m // step) * step
-    return m * chunk
+    return m * tile
 
 
 def pad_rows(flat, size):
@@ -131,33 +141,33 @@ def _unflatten_jit(out, batch_shape, n):
     return _unflatten(out, batch_shape, n)
 
 
-def map_chunks(fn, arrays, batch_shape, chunk=CHUNK):
-    """Apply ``fn`` to arrays whose leading axes are ``batch_shape`` in chunks of ``chunk``.
+def map_tiles(fn, arrays, batch_shape, tile=TILE):
+    """Apply ``fn`` to arrays whose leading axes are ``batch_shape`` in tiles of ``tile``.
 
     ``fn`` takes the arrays with one flattened leading batch axis and returns a pytree of
     arrays with that leading axis; the result has ``batch_shape`` restored.
     """
     flat, n = _flatten(arrays, batch_shape)
-    if n <= chunk:
+    if n <= tile:
         return _unflatten(fn(*flat), batch_shape, n)
-    n_chunks = -(-n // chunk)
-    flat = _pad_to(flat, n_chunks * chunk)
-    stacked = [x.reshape((n_chunks, chunk) + x.shape[1:]) for x in flat]
+    n_tiles = -(-n // tile)
+    flat = _pad_to(flat, n_tiles * tile)
+    stacked = [x.reshape((n_tiles, tile) + x.shape[1:]) for x in flat]
     out = jax.lax.map(lambda xs: fn(*xs), stacked)
-    out = jax.tree.map(lambda y: y.reshape((n_chunks * chunk,) + y.shape[2:]), out)
+    out = jax.tree.map(lambda y: y.reshape((n_tiles * tile,) + y.shape[2:]), out)
     return _unflatten(out, batch_shape, n)
 
 
-def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK, part_fn=None):
-    """``fn(*arrays)`` for a jitted batch-first ``fn`` that evaluates in ``map_chunks`` chunks,
+def map_threads(fn, arrays, batch_shape, threads=None, tile=TILE, part_fn=None):
+    """``fn(*arrays)`` for a jitted batch-first ``fn`` that evaluates in ``map_tiles`` tiles,
     run as ``threads`` equal parts side by side on host threads (JAX releases the GIL while
     XLA runs), outputs concatenated.
 
-    The parts start at multiples of ``chunk`` and hold whole chunks (the batch is padded as
-    ``map_chunks`` pads it, and the padding dropped), and each part has more than one chunk, so
-    every geometry is computed in the same chunk, at the same position, by the same compiled
-    chunk program as in one call: the results are bit-identical to ``fn(*arrays)`` (tested).
-    Batches of fewer than ``2 threads`` chunks are one call, and so is a call traced inside
+    The parts start at multiples of ``tile`` and hold whole tiles (the batch is padded as
+    ``map_tiles`` pads it, and the padding dropped), and each part has more than one tile, so
+    every geometry is computed in the same tile, at the same position, by the same compiled
+    tile program as in one call: the results are bit-identical to ``fn(*arrays)`` (tested).
+    Batches of fewer than ``2 threads`` tiles are one call, and so is a call traced inside
     the caller's ``jit`` (threads cannot share a trace).
 
     ``part_fn(start, size, *flat)``, if given, computes ``fn`` on rows [start, start + size)
@@ -167,11 +177,11 @@ def map_threads(fn, arrays, batch_shape, threads=None, chunk=CHUNK, part_fn=None
     a ~85 ms call.
     """
     threads = default_threads() if threads is None else int(threads)
-    n_chunks = -(-math.prod(batch_shape) // chunk)
+    n_tiles = -(-math.prod(batch_shape) // tile)
     traced = is_traced(arrays)
-    if threads <= 1 or n_chunks < 2 * threads or traced:  # under a caller's jit: inline
+    if threads <= 1 or n_tiles < 2 * threads or traced:  # under a caller's jit: inline
         return fn(*arrays)
-    per = -(-n_chunks // threads) * chunk  # geometries per part, whole chunks
+    per = -(-n_tiles // threads) * tile  # geometries per part, whole tiles
     flat, n = _flatten(arrays, batch_shape)
     flat = _pad_to(flat, per * threads)
 
@@ -217,3 +227,27 @@ def slice_rows(arrays, start, size):
     traced ``start`` (the ``part_fn`` of ``map_threads``); XLA fuses the slice into the
     kernel's first read of its inputs."""
     return [jax.lax.dynamic_slice_in_dim(x, start, size) for x in arrays]
+
+
+def materialize(x):
+    """Identity (NaN stays NaN) that XLA computes once and stores. XLA's fusion duplicates a
+    cheap elementwise producer into every consumer, also into one that broadcasts it; here that
+    repeated a whole unrolled solve for every element of an (L, L, B) product (measured: most
+    of the kernel). A division is 'expensive' for XLA and is never duplicated that way."""
+    if not jnp.issubdtype(x.dtype, jnp.floating):  # labels and masks: exact through float64
+        y = x.astype(jnp.float64)
+        return (y / (y == y).astype(y.dtype)).astype(x.dtype)
+    return x / (x == x).astype(x.dtype)
+
+
+def blocks(parts):
+    """jnp.concatenate(parts, axis=0), written as in-place updates of one buffer: XLA fuses a
+    concatenation with the computations of its parts into one loop that branches on every
+    element (measured: a scalar loop, 10x slower than the parts alone); an update slice loops
+    over its part only."""
+    out = jnp.zeros((sum(p.shape[0] for p in parts),) + parts[0].shape[1:], parts[0].dtype)
+    start = 0
+    for p in parts:
+        out = jax.lax.dynamic_update_slice_in_dim(out, p, start, axis=0)
+        start += p.shape[0]
+    return out
