@@ -125,3 +125,15 @@ from oaraim.araim.snapshot import (  # noqa: E402
 )
 
 __all__ += ["MonitorReplay", "ReplayConfig", "ReplayResult", "replay", "replay_metrics", "snapshot"]
+
+from oaraim.araim import filter_monitor  # noqa: E402
+from oaraim.araim.filter_monitor import (  # noqa: E402
+    FilterMonitorEpoch,
+    LinearModel,
+    run_ekf_monitor,
+    run_linear_monitor,
+    separation_monitor,
+)
+
+__all__ += ["FilterMonitorEpoch", "LinearModel", "filter_monitor", "run_ekf_monitor",
+            "run_linear_monitor", "separation_monitor"]

@@ -1,0 +1,301 @@
+"""Solution-separation integrity monitor of a Kalman filter bank (docs/filter-integrity.md).
+
+The main filter uses every valid source; one sub-filter per candidate fault mode (the slots of
+the ``FaultModeRule`` template, ``araim.fault_modes.select_fault_modes``) runs the same model
+without the sources that mode hypothesises faulty. All K = 1 + T filters start from the same
+prior and are propagated in one ``lax.scan``. Per epoch (Brenner 1996; Joerger and Pervan,
+"Kalman filter-based integrity monitoring against sensor faults", J. Guidance, Control, and
+Dynamics 36(2), 2013):
+
+    separation        Delta_i = x_i - x_0             (position part, ENU)
+    its covariance    P_ss,i = P_i - P_0              (both filters optimal for one model)
+    sigma_ss,i,q      sqrt(max(P_ss,i,qq, 0))          (0 below ZERO_SEPARATION_RTOL sigma_0)
+    threshold         T_i,q = K_fa,q sigma_ss,i,q      K_fa of seed 004 eq. (12)
+    detection         |Delta_i,q| > T_i,q for a monitored mode i and a direction q
+    PLs               seed 004 eqs. (14), (16) with sigma_i,q = sqrt(P_i,qq), b = 0,
+                      solved by the snapshot MHSS root finder (``araim.mhss.root``)
+
+The fault modes, their priors, the order and P_NM are those of the snapshot MHSS at the
+epoch's valid sources (same rule, same budget), so a filter that forgets everything (huge
+process noise) gives the snapshot MHSS of the epoch, and a static state with no process noise
+after k epochs gives the snapshot MHSS of the k epochs' measurements stacked (both tested,
+tests/test_filter_monitor.py).
+
+Two banks: ``run_linear_monitor`` (a linear model x+ = Phi x + w, z = H x + v, information-form
+measurement update, exact for a diffuse prior) and ``run_ekf_monitor`` (the LTE + IMU
+error-state EKF of seed 000, ``araim.ekf``: every sub-filter a full EKF with its own nominal
+state). ``separation_monitor`` turns one epoch of a bank (means and covariances) into the PLs.
+Nominal biases (b_nom of the snapshot) are not modelled: the bank's model must carry them
+(Gauss-Markov states or an overbounding noise; docs/filter-integrity.md).
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import special
+
+from oaraim.araim import ekf as _ekf
+from oaraim.araim.budget import IntegrityBudget
+from oaraim.araim.fault_modes import (
+    DEFAULT_RULE,
+    FaultModeRule,
+    check_order,
+    event_template,
+    fault_mode_rule,
+    mode_template,
+    select_fault_modes,
+)
+from oaraim.araim.mhss.projection import ZERO_SEPARATION_RTOL, Projection
+from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
+from oaraim.araim.status import Status
+
+__all__ = ["FilterMonitorEpoch", "LinearModel", "false_alert_factors", "n_bank_filters",
+           "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
+
+
+class FilterMonitorEpoch(NamedTuple):
+    """One epoch of the solution-separation filter monitor (leading axes: whatever the caller
+    scans or vmaps over; K = 1 + T filters, filter 0 the main one)."""
+
+    hpl_m: jax.Array
+    """() HPL = sqrt(PL_E^2 + PL_N^2), seed 004 eq. (15); inf where status != OK."""
+    vpl_m: jax.Array
+    """() VPL, eq. (16); inf where status != OK (a ground vehicle reads the HPL only)."""
+    emt_m: jax.Array
+    """() effective monitor threshold (vertical, modes with prior >= P_EMT)."""
+    pl_enu_m: jax.Array
+    """(3,) PL_E, PL_N, PL_U."""
+    position_m: jax.Array
+    """(3,) the main filter's position (ENU of the filter's frame)."""
+    separation_m: jax.Array
+    """(K, 3) x_i - x_0 (position, ENU); 0 for i = 0."""
+    sigma_m: jax.Array
+    """(K, 3) sqrt(P_i,qq) of each filter's position."""
+    sigma_ss_m: jax.Array
+    """(K, 3) sqrt(P_i,qq - P_0,qq) where the mode is monitored, else 0."""
+    threshold_m: jax.Array
+    """(K, 3) T_i,q = K_fa,q sigma_ss,i,q where monitored, else 0."""
+    test_ratio: jax.Array
+    """() max over monitored modes and q of |Delta_i,q| / T_i,q (0 without monitored modes)."""
+    alert: jax.Array
+    """() bool: some monitored separation exceeds its threshold (test_ratio > 1)."""
+    prior: jax.Array
+    """(K,) P_f of the monitored modes, 0 otherwise (0 for i = 0)."""
+    monitored: jax.Array
+    """(K,) bool: the mode is live at this epoch (False for i = 0)."""
+    n_modes: jax.Array
+    """() N_f, the monitored modes."""
+    p_not_monitored: jax.Array
+    """() P_NM of eqs. (14), (16)."""
+    status: jax.Array
+    """() ``araim.Status`` (int8)."""
+
+
+def n_bank_filters(n_sources: int, n_constellations: int, max_order: int = 1,
+                   fault_modes=DEFAULT_RULE) -> int:
+    """K = 1 + T: the main filter and one sub-filter per template slot of ``fault_modes`` at
+    ``max_order`` for L sources and C constellation slots."""
+    rule = fault_mode_rule(fault_modes)
+    if rule.events:
+        return 1 + event_template(n_sources, n_constellations, max_order).order.size
+    return 1 + mode_template(n_sources, n_constellations, max_order).order.size
+
+
+def false_alert_factors(n_modes, n_slots: int, budget: IntegrityBudget):
+    """K_fa (3, ...) of seed 004 eq. (12) for N_f = ``n_modes`` (N_f = 0 read as 1):
+    K_fa,H = Q^-1(P_FA_H / (4 N_f)), K_fa,V = Q^-1(P_FA_V / (2 N_f)), the budgets divided by
+    ``n_es_cont``. The table over N_f = 0..n_slots is evaluated on the host, as the snapshot
+    MHSS does (``araim.mhss.projection``), so both give the same bits."""
+    nf = np.maximum(np.arange(n_slots + 1), 1)
+    pfa_h, pfa_v = budget.p_fa_h / budget.n_es_cont, budget.p_fa_v / budget.n_es_cont
+    k_h = jnp.take(jnp.asarray(-special.ndtri(pfa_h / (4.0 * nf))), n_modes)
+    k_v = jnp.take(jnp.asarray(-special.ndtri(pfa_v / (2.0 * nf))), n_modes)
+    return jnp.stack([k_h, k_h, k_v], axis=0)
+
+
+def _epoch_modes(valid, constellation, p_sat, p_const, budget, rule, max_order):
+    """``select_fault_modes`` of one epoch (batch of one, batch-last inside)."""
+    return select_fault_modes(valid[:, None], constellation[:, None], p_sat[:, None],
+                              p_const[:, None], budget, rule, max_order)
+
+
+def separation_monitor(x_pos, p_pos, fm, budget: IntegrityBudget,
+                       iterations: int = PL_ITERATIONS) -> FilterMonitorEpoch:
+    """The monitor of one epoch from the bank's position estimates ``x_pos`` (K, 3), their
+    covariances ``p_pos`` (K, 3, 3) (ENU, m, m^2; filter 0 the main one) and the epoch's fault
+    modes ``fm`` (``select_fault_modes`` with a batch of one, T = K - 1 slots). Jit-safe; vmap
+    it over drives. Returns ``FilterMonitorEpoch``."""
+    K = x_pos.shape[0]
+    var = jnp.diagonal(p_pos, axis1=-2, axis2=-1)  # (K, 3)
+    finite = jnp.all(jnp.isfinite(var), axis=1) & jnp.all(jnp.isfinite(x_pos), axis=1)
+    ok_var = finite & jnp.all(var > 0.0, axis=1)
+    live = jnp.concatenate([jnp.zeros((1,), bool), fm.live[:, 0]])
+    monitored = live & ok_var
+    usable = monitored.at[0].set(ok_var[0])
+    sigma = jnp.sqrt(jnp.where(usable[:, None], var, 1.0))
+    ss2 = jnp.where(monitored[:, None], var - var[:1], 0.0)
+    sigma_ss = jnp.sqrt(jnp.maximum(ss2, 0.0))
+    sigma_ss = jnp.where(sigma_ss <= ZERO_SEPARATION_RTOL * sigma[:1], 0.0, sigma_ss)
+    n_modes = jnp.sum(monitored)
+    k_fa = false_alert_factors(n_modes, K - 1, budget)  # (3,)
+    threshold = jnp.where(monitored[:, None], k_fa[None] * sigma_ss, 0.0)
+    prior_all = jnp.concatenate([jnp.zeros((1,)), fm.prior[:, 0]])
+    prior = jnp.where(monitored, prior_all, 0.0)
+    p_nm = fm.p_beyond_order[0] + jnp.sum(jnp.where(live & ~ok_var, prior_all, 0.0))
+    sep = jnp.where(usable[:, None], x_pos - x_pos[:1], 0.0)
+    status = jnp.where(~ok_var[0], Status.SINGULAR_GEOMETRY,
+                       jnp.where(p_nm > budget.p_thresh, Status.UNMONITORED_RISK, Status.OK))
+    status = jnp.asarray(status, jnp.int8)
+    b = lambda x: x[..., None]  # noqa: E731  (batch of one, last)
+    pr = Projection(
+        s_pos=None, sigma=b(sigma), bias=jnp.zeros((K, 3, 1)), sigma_ss=b(sigma_ss),
+        threshold=b(threshold), monitored=b(monitored), prior=b(prior),
+        excluded=jnp.concatenate([jnp.zeros_like(fm.excluded[:1]), fm.excluded]),
+        n_modes=b(n_modes), p_not_monitored=b(p_nm), order=fm.order, status=b(status),
+        sigma_acc_u=b(sigma[0, 2]))
+    pl, status, emt = pls_from_projection(pr, budget, iterations)
+    pl, status, emt = pl[:, 0], status[0], emt[0]
+    ok = status == Status.OK
+    pl_ok = jnp.where(ok, pl[:2], 0.0)
+    hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
+    ratio = jnp.where(threshold > 0.0, jnp.abs(sep) / jnp.where(threshold > 0.0, threshold, 1.0),
+                      jnp.where(monitored[:, None] & (jnp.abs(sep) > 0.0), jnp.inf, 0.0))
+    test = jnp.max(ratio)
+    return FilterMonitorEpoch(
+        hpl_m=hpl, vpl_m=pl[2], emt_m=emt, pl_enu_m=pl, position_m=x_pos[0], separation_m=sep,
+        sigma_m=sigma, sigma_ss_m=sigma_ss, threshold_m=threshold, test_ratio=test,
+        alert=test > 1.0, prior=prior, monitored=monitored, n_modes=n_modes,
+        p_not_monitored=p_nm, status=status)
+
+
+def _modes_and_used(valid, constellation, p_sat, p_const, budget, rule, max_order):
+    """The epoch's fault modes and each filter's used sources (K, L): filter 0 every valid
+    source, filter i the valid sources slot i does not exclude."""
+    fm = _epoch_modes(valid, constellation, p_sat, p_const, budget, rule, max_order)
+    used = jnp.concatenate([valid[None], valid[None] & ~fm.excluded[:, :, 0]], axis=0)
+    return fm, used
+
+
+# ------------------------------------------------------------------------------------------
+# A linear model
+
+
+class LinearModel(NamedTuple):
+    """x_{k} = Phi_k x_{k-1} + w_k, w_k ~ N(0, Q_k); z_k = H_k x_k + v_k, v_k ~ N(0, diag(R_k)).
+    The first three states are the position (east, north, up, m). Each field carries a leading
+    epoch axis E (``run_linear_monitor`` scans over it)."""
+
+    phi: jax.Array
+    """(E, n, n) transition over the interval ending at epoch k."""
+    q: jax.Array
+    """(E, n, n) process noise covariance of that interval."""
+    h: jax.Array
+    """(E, L, n) measurement rows."""
+    r_var: jax.Array
+    """(E, L) measurement variances, m^2."""
+
+
+def _spd_inv(a):
+    """Inverse of a small SPD matrix by Cholesky (symmetrized)."""
+    c = jax.scipy.linalg.cho_factor(a, lower=True)
+    inv = jax.scipy.linalg.cho_solve(c, jnp.eye(a.shape[-1], dtype=a.dtype))
+    return 0.5 * (inv + inv.T)
+
+
+def linear_update(x, p, h, z, r_var, used):
+    """Kalman measurement update in information form (one filter): P+ = (P^-1 + H^T W H)^-1,
+    x+ = x + P+ H^T W (z - H x), W = diag(1 / R) on the used rows, 0 elsewhere. Algebraically
+    the covariance-form update; exact where P is diffuse (a prior of 1e12 m^2 adds 1e-12 to the
+    information instead of subtracting nearly equal numbers)."""
+    w = jnp.where(used, 1.0 / jnp.where(used, r_var, 1.0), 0.0)
+    info = _spd_inv(p) + (h * w[:, None]).T @ h
+    p_new = _spd_inv(info)
+    nu = jnp.where(used, z - h @ x, 0.0)
+    return x + p_new @ (h.T @ (w * nu)), p_new
+
+
+def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sat, p_const,
+                       budget: IntegrityBudget, max_order: int = 1,
+                       fault_modes: FaultModeRule = DEFAULT_RULE,
+                       iterations: int = PL_ITERATIONS):
+    """The filter bank on a linear model over E epochs (one ``lax.scan``).
+
+    ``x0`` (n,), ``p0`` (n, n): the common prior of every filter; ``z``, ``valid`` (E, L);
+    ``constellation`` (L,) int labels 0..C-1; ``p_sat`` (E, L) or (L,) per-epoch priors;
+    ``p_const`` (C,); ``max_order`` static. Per epoch: predict every filter
+    (x <- Phi x, P <- Phi P Phi^T + Q), update filter i with its used sources
+    (``linear_update``), then ``separation_monitor``. Returns (final (x (K, n), P (K, n, n)),
+    ``FilterMonitorEpoch`` stacked over epochs)."""
+    rule = fault_mode_rule(fault_modes)
+    max_order = check_order(rule, max_order)
+    E, L = z.shape
+    K = n_bank_filters(L, p_const.shape[-1], max_order, rule)
+    p_sat = jnp.broadcast_to(jnp.asarray(p_sat, jnp.float64), (E, L))
+    constellation = jnp.asarray(constellation)
+    p_const = jnp.asarray(p_const, jnp.float64)
+    xs = jnp.broadcast_to(jnp.asarray(x0, jnp.float64), (K,) + x0.shape)
+    ps = jnp.broadcast_to(jnp.asarray(p0, jnp.float64), (K,) + p0.shape)
+
+    def body(carry, inp):
+        x, p = carry
+        phi, q, h, r_var, zz, vv, ps_e = inp
+        fm, used = _modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        x = x @ phi.T
+        p = phi @ p @ phi.T + q
+        x, p = jax.vmap(linear_update, in_axes=(0, 0, None, None, None, 0))(x, p, h, zz, r_var,
+                                                                          used)
+        out = separation_monitor(x[:, :3], p[:, :3, :3], fm, budget, iterations)
+        return (x, p), out
+
+    return jax.lax.scan(body, (xs, ps), (model.phi, model.q, model.h, model.r_var, z,
+                                         jnp.asarray(valid, bool), p_sat))
+
+
+# ------------------------------------------------------------------------------------------
+# The seed 000 LTE + IMU error-state EKF
+
+
+def ekf_bank_step(states: _ekf.EkfState, gyro, accel, z, used, tx_pos, tx_clk_m, sigma_m,
+                  params: _ekf.EkfParams):
+    """Predict and update every EKF of the bank (leading axis K of ``states`` and ``used``
+    (K, L)): each a full seed 000 EKF (``araim.ekf.ekf_step``) with its own nominal state,
+    linearized at its own estimate. Returns the new states."""
+
+    def one(st, u):
+        st, _ = _ekf.ekf_step(st, gyro, accel, z, u, tx_pos, tx_clk_m, sigma_m, params)
+        return st
+
+    return jax.vmap(one)(states, used)
+
+
+def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m,
+                    params: _ekf.EkfParams, constellation, p_sat, p_const,
+                    budget: IntegrityBudget, max_order: int = 1,
+                    fault_modes: FaultModeRule = DEFAULT_RULE,
+                    iterations: int = PL_ITERATIONS):
+    """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); inputs as
+    ``araim.ekf.run_ekf`` (``gyro``, ``accel`` (E, n, 3); ``z``, ``valid``, ``tx_clk_m`` (E, L);
+    ``tx_pos`` (L, 3)) plus the towers' operator labels ``constellation`` (L,), their priors
+    ``p_sat`` (L,) or (E, L) and ``p_const`` (C,). Every filter starts from ``state0``. Returns
+    (final bank states, ``FilterMonitorEpoch`` stacked over epochs); the position is ENU in
+    the filter's frame G."""
+    rule = fault_mode_rule(fault_modes)
+    max_order = check_order(rule, max_order)
+    E, L = z.shape
+    K = n_bank_filters(L, p_const.shape[-1], max_order, rule)
+    p_sat = jnp.broadcast_to(jnp.asarray(p_sat, jnp.float64), (E, L))
+    constellation = jnp.asarray(constellation)
+    p_const = jnp.asarray(p_const, jnp.float64)
+    bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), state0)
+
+    def body(bank, inp):
+        g, a, zz, vv, tc, ps_e = inp
+        fm, used = _modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sigma_m, params)
+        out = separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, budget, iterations)
+        return bank, out
+
+    return jax.lax.scan(body, bank0, (gyro, accel, z, jnp.asarray(valid, bool), tx_clk_m,
+                                      p_sat))
