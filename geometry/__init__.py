@@ -88,3 +88,18 @@ from oaraim.geometry.sis_error import SISError, compare_broadcast_precise  # noq
 __all__ += ["ClockFileError", "PreciseClocks", "SISError", "beidou_nav",
             "compare_broadcast_precise", "galileo_nav", "read_clock_rinex", "rinex_clk",
             "sis_error"]
+
+from oaraim.geometry import leo  # noqa: E402
+from oaraim.geometry.leo import (  # noqa: E402
+    LEO_PRESETS,
+    TleConstellation,
+    TleFileError,
+    WalkerConstellation,
+    WalkerShell,
+    combine_skies,
+    leo_constellation,
+    leo_sky,
+)
+
+__all__ += ["LEO_PRESETS", "TleConstellation", "TleFileError", "WalkerConstellation",
+            "WalkerShell", "combine_skies", "leo", "leo_constellation", "leo_sky"]

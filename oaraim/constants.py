@@ -72,3 +72,17 @@ OMEGA_E_BDS_RAD_S = 7.2921150e-5
 #: BDS-SIS-ICD-B3I 1.0, 3.1: 1268.52 MHz)
 F_B1I_HZ = 1561.098e6
 F_B3I_HZ = 1268.52e6
+
+#: WGS-84 second zonal harmonic J2 = -sqrt(5) C_20 with C_20 = -0.484166774985e-3 (NIMA
+#: TR8350.2, 3rd ed. 2000, Table 5.1, EGM96): the secular node and perigee rates of LEO
+#: Walker shells (``geometry.leo``)
+WGS84_J2 = 1.08262998905e-3
+#: GPS - UTC leap seconds: (UTC date the count starts, count), IERS Bulletin C (the 18th, of
+#: 1 January 2017, is the latest here: add a row when a Bulletin C announces one). Used only to
+#: read UTC epochs (two-line element sets)
+GPS_UTC_LEAP_SECONDS = (
+    ((1981, 7, 1), 1), ((1982, 7, 1), 2), ((1983, 7, 1), 3), ((1985, 7, 1), 4),
+    ((1988, 1, 1), 5), ((1990, 1, 1), 6), ((1991, 1, 1), 7), ((1992, 7, 1), 8),
+    ((1993, 7, 1), 9), ((1994, 7, 1), 10), ((1996, 1, 1), 11), ((1997, 7, 1), 12),
+    ((1999, 1, 1), 13), ((2006, 1, 1), 14), ((2009, 1, 1), 15), ((2012, 7, 1), 16),
+    ((2015, 7, 1), 17), ((2017, 1, 1), 18))
