@@ -51,7 +51,8 @@ from oaraim.araim.mhss.projection import ZERO_SEPARATION_RTOL, Projection
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.status import Status
 
-__all__ = ["FilterMonitorEpoch", "LinearModel", "false_alert_factors", "n_bank_filters",
+__all__ = ["FilterMonitorEpoch", "LinearModel", "ekf_bank_step", "epoch_modes_and_used",
+           "false_alert_factors", "linear_update", "n_bank_filters",
            "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
 
 
@@ -170,7 +171,7 @@ def separation_monitor(x_pos, p_pos, fm, budget: IntegrityBudget,
         p_not_monitored=p_nm, status=status)
 
 
-def _modes_and_used(valid, constellation, p_sat, p_const, budget, rule, max_order):
+def epoch_modes_and_used(valid, constellation, p_sat, p_const, budget, rule, max_order):
     """The epoch's fault modes and each filter's used sources (K, L): filter 0 every valid
     source, filter i the valid sources slot i does not exclude."""
     fm = _epoch_modes(valid, constellation, p_sat, p_const, budget, rule, max_order)
@@ -241,7 +242,7 @@ def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sa
     def body(carry, inp):
         x, p = carry
         phi, q, h, r_var, zz, vv, ps_e = inp
-        fm, used = _modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        fm, used = epoch_modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
         x = x @ phi.T
         p = phi @ p @ phi.T + q
         x, p = jax.vmap(linear_update, in_axes=(0, 0, None, None, None, 0))(x, p, h, zz, r_var,
@@ -292,7 +293,7 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
 
     def body(bank, inp):
         g, a, zz, vv, tc, ps_e = inp
-        fm, used = _modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        fm, used = epoch_modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
         bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sigma_m, params)
         out = separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, budget, iterations)
         return bank, out

@@ -70,3 +70,16 @@ __all__ = [
     "simulate_drive", "sop_errors", "synthesize_recording", "to_recording", "trajectory",
     "uav_seed004",
 ]
+
+from oaraim.sim import faults, filter_drive  # noqa: E402
+from oaraim.sim.faults import FaultScenario, draw_faults, fault_profile_m, no_fault  # noqa: E402
+from oaraim.sim.filter_drive import (  # noqa: E402
+    FilterDriveConfig,
+    FilterDriveSummary,
+    FilterDriveTrace,
+    simulate_filter_drive,
+)
+
+__all__ += ["FaultScenario", "FilterDriveConfig", "FilterDriveSummary", "FilterDriveTrace",
+            "draw_faults", "fault_profile_m", "faults", "filter_drive", "no_fault",
+            "simulate_filter_drive"]
