@@ -20,14 +20,26 @@ Group delays (what the broadcast clocks refer to, and what is not corrected here
   enters times f1^2 / (f1^2 - f2^2) = 2.55. The DCB is not in the navigation or observation
   files and is left uncorrected; the nominal bias b_nom of the ISM bounds it (0.75 m).
 * The GPS L1/L5 combination needs the inter-signal corrections ISC_L1C, ISC_L5I5/Q5 of the
-  CNAV message (IS-GPS-705 20.3.3.3.1.2); a RINEX 3 LNAV record carries none: left
-  uncorrected (decimetres), also under b_nom.
+  CNAV message (IS-GPS-705 20.3.3.3.1.2); a RINEX 3 LNAV record carries none. Uncorrected,
+  L1/L5 is metres off the LNAV reference, and differently per satellite block: on the shared
+  days the median P_IF(L1/L5) - P_IF(L1/C2W) is -4.7 m on every GPS III satellite and
+  +0.3 to +3.1 m on the IIF ones at NIST (2023-01-01), -1.1 to -0.3 m and +4.9 to +7.4 m at
+  TLSE (2024-01-01; the stations differ by a common -4.3 m, their receivers' C5 - C2W bias),
+  far beyond b_nom = 0.75 m: the NIST day replayed so gave 1,712 detections and 53 failed
+  exclusions. ``gps_pair="l1l5"`` (the default) therefore refers each satellite's L1/L5 to
+  the L1/L2 reference before use: ``l5_offsets_m`` is, per satellite, the median over the
+  file of P_IF(L1/L5) - P_IF(L1/L2) at the epochs both are observed (noise about 0.7 m per
+  epoch, so a few centimetres over an hour), and it is subtracted. A satellite with L5 that
+  is never seen with C2W keeps its L1/L5 uncorrected (``l5_offset_m`` NaN; a receiver
+  without L2 altogether has no way to do better without the CNAV ISCs).
+  ``gps_pair="l1l5-raw"`` uses L1/L5 uncorrected (to study the bias).
 * The Galileo F/NAV clock refers to the E1/E5a ionosphere-free combination (OS SIS ICD
   5.1.3): no BGD for E1/E5a (load the orbits with ``galileo_source="fnav"``).
 * Receiver biases common to a constellation's satellites go into its clock; the difference
   between a GPS satellite on L1/L5 and one on L1/L2 (the receiver's C2W - C5 bias, times the
-  factors) does not, and is a second reason to prefer one pair per constellation: ``PAIRS``
-  order and ``gps_pair`` (``"l1l5"`` L1/L5 first, ``"l1l2"`` L1/L2 only).
+  factors) does not: the L1/L5 offset above removes it with the satellite part.
+  ``gps_pair``: ``"l1l5"`` L1/L5 first (offsets removed), ``"l1l5-raw"`` the same without
+  the offsets, ``"l1l2"`` L1/L2 only.
 """
 
 from typing import NamedTuple
@@ -68,17 +80,48 @@ class IonoFree(NamedTuple):
     """(T, S) int8: the pair used (``GPS_L1L5``, ``GPS_L1L2``, ``GAL_E1E5A``), 0 none."""
     noise_factor: np.ndarray
     """(T, S) ``factor`` of that pair (1 where none)."""
+    l5_offset_m: np.ndarray
+    """(S,) the median P_IF(L1/L5) - P_IF(L1/L2) removed from a GPS satellite's L1/L5 (module
+    docstring), metres; NaN where none was removed (no L5, never seen with C2W, or a
+    ``gps_pair`` other than ``"l1l5"``)."""
+
+
+#: ``gps_pair`` choices of ``iono_free``
+GPS_PAIRS = ("l1l5", "l1l5-raw", "l1l2")
+
+
+def _pair(table, c1, c2, f1, f2):
+    p1, _ = table.pick(c1)
+    p2, _ = table.pick(c2)
+    val = f1**2 / (f1**2 - f2**2) * p1 - f2**2 / (f1**2 - f2**2) * p2
+    return np.where(np.isfinite(val) & (p1 > 0) & (p2 > 0), val, np.nan)
+
+
+def l5_offsets_m(table):
+    """(S,) per satellite the median over the table's epochs of P_IF(L1/L5) - P_IF(L1/L2)
+    where both are observed, metres (NaN where never both): what refers a GPS satellite's
+    L1/L5 to the LNAV clock's L1/L2 reference without the CNAV ISCs (module docstring)."""
+    (_, _, a1, a2, fa1, fa2), (_, _, b1, b2, fb1, fb2) = PAIRS[0], PAIRS[1]
+    diff = _pair(table, a1, a2, fa1, fa2) - _pair(table, b1, b2, fb1, fb2)
+    gps = np.array([s[0] == "G" for s in table.sv])
+    both = np.isfinite(diff) & gps[None, :]
+    out = np.full(table.sv.size, np.nan)
+    for j in np.flatnonzero(both.any(0)):
+        out[j] = float(np.median(diff[both[:, j], j]))
+    return out
 
 
 def iono_free(table, gps_pair="l1l5") -> IonoFree:
     """Per satellite and epoch, the first pair of ``PAIRS`` observed (module docstring);
-    ``gps_pair="l1l2"``: GPS on L1/L2 only."""
-    if gps_pair not in ("l1l5", "l1l2"):
-        raise ValueError(f"gps_pair must be 'l1l5' or 'l1l2', got {gps_pair!r}")
+    ``gps_pair``: ``"l1l5"`` (L1/L5 referred to L1/L2 by ``l5_offsets_m``), ``"l1l5-raw"``
+    (uncorrected) or ``"l1l2"`` (GPS on L1/L2 only)."""
+    if gps_pair not in GPS_PAIRS:
+        raise ValueError(f"gps_pair must be one of {', '.join(GPS_PAIRS)}, got {gps_pair!r}")
     n_t, n_s = table.t_gps_s.size, table.sv.size
     pr = np.full((n_t, n_s), np.nan)
     comb = np.zeros((n_t, n_s), np.int8)
     fac = np.ones((n_t, n_s))
+    offset = np.full(n_s, np.nan)
     system = np.array([s[0] for s in table.sv])
     for code, sysch, c1, c2, f1, f2 in PAIRS:
         if code == GPS_L1L5 and gps_pair == "l1l2":
@@ -86,15 +129,16 @@ def iono_free(table, gps_pair="l1l5") -> IonoFree:
         cols = system == sysch
         if not cols.any():
             continue
-        p1, _ = table.pick(c1)
-        p2, _ = table.pick(c2)
-        g1, g2 = f1**2 / (f1**2 - f2**2), f2**2 / (f1**2 - f2**2)
-        val = g1 * p1 - g2 * p2
-        fill = cols[None, :] & (comb == NONE) & np.isfinite(val) & (p1 > 0) & (p2 > 0)
+        val = _pair(table, c1, c2, f1, f2)
+        if code == GPS_L1L5 and gps_pair == "l1l5":
+            offset = l5_offsets_m(table)
+            val = val - np.nan_to_num(offset)[None, :]
+        fill = cols[None, :] & (comb == NONE) & np.isfinite(val)
         pr[fill] = val[fill]
         comb[fill] = code
         fac[fill] = factor(f1, f2)
-    return IonoFree(pr, comb, fac)
+    offset[~(comb == GPS_L1L5).any(0)] = np.nan
+    return IonoFree(pr, comb, fac, offset)
 
 
 def single_frequency(table) -> IonoFree:
@@ -110,4 +154,4 @@ def single_frequency(table) -> IonoFree:
         fill = (system == sysch)[None, :] & np.isfinite(p) & (p > 0)
         pr[fill] = p[fill]
         comb[fill] = code
-    return IonoFree(pr, comb, np.ones((n_t, n_s)))
+    return IonoFree(pr, comb, np.ones((n_t, n_s)), np.full(n_s, np.nan))

@@ -90,6 +90,8 @@ REPLAY_BUDGETS = {"lpv200": araim.BUDGET_LPV200_MAAST, "lpv200-add": araim.BUDGE
                   "seed004-table-i": araim.BUDGET_SEED004_TABLE_I}
 BUDGET_NAMES = {"lpv200": "LPV-200 (MAAST)", "lpv200-add": "LPV-200 (ADD table)",
                 "seed004-table-i": "seed 004 Table I"}
+#: ``constellations``: the RINEX system letters of the dual-frequency and single users
+SYSTEMS_OF = {"auto": "GE", "gps": "G", "galileo": "E"}
 #: the Stanford diagrams: (name, error, PL, alert limit key) per axis
 STANFORD_AXES = (("horizontal", "hpe", "hpl", "hal_m"), ("vertical", "vpe", "vpl", "val_m"))
 
@@ -115,6 +117,71 @@ def parse_truth(name, v):
         raise ValueError(f"{name} must be a point near the Earth's surface (|X| between 6,200 "
                          f"and 6,500 km), got {v!r} (|X| = {r / 1e3:.1f} km)")
     return xyz
+
+
+FAULT_KINDS = ("step", "ramp")
+
+
+def parse_faults(name, v):
+    """'none' or 'SV,KIND,SIZE,ONSET_S[;...]' (``FAULT_KINDS``: step SIZE in m, ramp in m/s)
+    -> the canonical text ('none' or the faults joined by ';')."""
+    s = str(v).strip()
+    if s in ("", "none"):
+        return "none"
+    out = []
+    for part in s.split(";"):
+        f = [x.strip() for x in part.split(",")]
+        try:
+            sv, kind, size, onset = f[0].upper(), f[1], float(f[2]), float(f[3])
+            ok = (len(f) == 4 and len(sv) == 3 and sv[0].isalpha() and sv[1:].isdigit()
+                  and kind in FAULT_KINDS and np.isfinite(size) and np.isfinite(onset)
+                  and onset >= 0)
+        except (IndexError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"{name} must be 'none' or SV,step,BIAS_M,ONSET_S or "
+                             "SV,ramp,RATE_M_PER_S,ONSET_S (e.g. G05,ramp,0.5,600; onset "
+                             f"seconds after the first epoch, >= 0), got {part.strip()!r}")
+        out.append(f"{sv},{kind},{size:g},{onset:g}")
+    return ";".join(out)
+
+
+def fault_bias_m(fault, t_gps_s, sv):
+    """(T, S) pseudorange errors of the ``fault`` text (``parse_faults``) at the epochs
+    ``t_gps_s`` on the satellites ``sv`` (zeros for 'none'); an SV not in ``sv``: one-line
+    error."""
+    t = np.asarray(t_gps_s, np.float64)
+    bias = np.zeros((t.size, len(sv)))
+    if fault == "none":
+        return bias
+    names = [str(x) for x in sv]
+    for part in fault.split(";"):
+        s_v, kind, size, onset = part.split(",")
+        if s_v not in names:
+            raise ValueError(f"fault: {s_v} is not among the satellites used "
+                             f"({', '.join(names[:6])}...); pick one the file observes")
+        dt = t - (t[0] if t.size else 0.0) - float(onset)
+        on = dt >= 0
+        grow = float(size) * (dt if kind == "ramp" else 1.0)
+        bias[:, names.index(s_v)] += np.where(on, grow, 0.0)
+    return bias
+
+
+def unmonitored(out):
+    """``fde=off``: the MHSS and slope results of the user without the monitors' decisions:
+    all-in-view position errors and PLs at every epoch, nothing excluded. The LPV-200 share
+    keeps the EMT and sigma_acc of the solution the MHSS kept (the all-in-view one wherever it
+    detected nothing)."""
+    o = dict(out)
+    for kind in ("mhss", "slope"):
+        o[f"hpe_{kind}_m"], o[f"vpe_{kind}_m"] = out["hpe_m"], out["vpe_m"]
+        o[f"hpl_{kind}_m"] = out[f"hpl_{kind}_aiv_m"]
+        o[f"vpl_{kind}_m"] = out[f"vpl_{kind}_aiv_m"]
+        o[f"{kind}_excluded"] = np.zeros_like(out[f"{kind}_excluded"])
+        failed = out[f"{kind}_status"] == araim.Status.EXCLUSION_FAILED
+        o[f"{kind}_status"] = np.where(failed & np.isfinite(o[f"hpl_{kind}_m"]),
+                                       araim.Status.OK, out[f"{kind}_status"]).astype(np.int8)
+    return o
 
 
 def data_files(obs, nav):
@@ -361,11 +428,24 @@ class RinexReplay(Study):
                          "dual-frequency GPS + Galileo (ionosphere-free) where the observation "
                          "file has it, else GPS L1; dual; gps-l1; single: GPS L1 + Galileo E1 "
                          "(T_GD, BGD, Klobuchar on both)"),
-        "gps_pair": Param("l1l5", parse_choice("l1l5", "l1l2"), "dual: GPS L1/L5 where "
-                          "observed, else L1/L2 (C1C/C2W); l1l2: GPS L1/L2 only"),
-        "airborne_model": Param("add", parse_choice("add", "ed259a"), "dual: airborne noise "
-                                "and multipath, the ADD's (times the iono-free factor) or "
-                                "ED-259A's"),
+        "gps_pair": Param("l1l5", parse_choice(*dual_replay.dfq.GPS_PAIRS), "dual: l1l5, "
+                          "GPS L1/L5 where observed (referred to L1/L2 by the per-satellite "
+                          "median L1/L5 - L1/L2 offset of the file: a RINEX 3 navigation "
+                          "file has no CNAV ISCs), else L1/L2 (C1C/C2W); l1l5-raw: L1/L5 "
+                          "uncorrected; l1l2: GPS L1/L2 only"),
+        "constellations": Param("auto", parse_choice("auto", "gps", "galileo"), "dual and "
+                                "single: auto, GPS + Galileo where the files have them; gps or "
+                                "galileo alone"),
+        "fault": Param("none", parse_faults, "faults injected into the pseudoranges: 'none' "
+                       "or SV,step,BIAS_M,ONSET_S / SV,ramp,RATE_M_PER_S,ONSET_S (onset in "
+                       "seconds after the first epoch), several joined by ';'"),
+        "fde": Param("on", parse_choice("on", "off"), "on: the monitors detect and exclude; "
+                     "off: the unmonitored user, all-in-view position and PLs whatever the "
+                     "tests say (to count the misleading epochs a monitor prevents)"),
+        "airborne_model": Param("ed259a", parse_choice("ed259a", "add"), "dual: airborne "
+                                "noise and multipath, EUROCAE ED-259A's dual-frequency curve "
+                                "(the availability map's and the epoch API's default) or the "
+                                "ADD's L1 curves times the iono-free factor"),
         "galileo_ism": Param(dual_replay.ISM_GALILEO_TEXT, dual_replay.parse_ism, "dual: "
                              "Galileo ISM sigma_URA,b_nom,P_sat,P_const (ADD defaults)"),
         "iono": Param("klobuchar", parse_choice("klobuchar", "none"), "ionospheric correction"),
@@ -419,12 +499,31 @@ class RinexReplay(Study):
                                               "galileo_ism", params["galileo_ism"])),
                                           airborne_model=params["airborne_model"],
                                           gps_pair=params["gps_pair"], tropo=params["tropo"],
-                                          single=params["signals"] == "single")
+                                          single=params["signals"] == "single",
+                                          systems=SYSTEMS_OF[params["constellations"]])
             obs = obs._replace(sv=inp["sv"])
+            raw = [s for s in inp["sv"][np.isnan(inp["l5_offset_m"])
+                                        & (inp["combination"] == 1).any(0)]]
+            if raw and params["gps_pair"] == "l1l5":
+                warnings.warn(f"{len(raw)} GPS satellites ({', '.join(raw[:4])}) have L5 but "
+                              "no C2W in the file: their L1/L5 cannot be referred to L1/L2 and "
+                              "keeps metres of inter-signal bias (gps_l5_uncorrected in the "
+                              "summary); --set gps_pair=l1l2 avoids it", stacklevel=2)
+        elif params["constellations"] == "galileo":
+            raise ValueError(f"{obs_path}: constellations=galileo needs a RINEX 3 file with "
+                             "Galileo codes and signals=auto, dual or single")
         else:
             inp = gnss_replay_inputs(obs, eph, extras, mask_deg=params["mask_deg"],
                                      sigma_ura_m=params["sigma_ura_m"], iono=params["iono"],
                                      tropo=params["tropo"])
+        bias = fault_bias_m(params["fault"], obs.t_gps_s, obs.sv)
+        hit = (bias != 0) & inp["valid"]
+        for j in np.flatnonzero((bias != 0).any(0) & ~hit.any(0)):
+            warnings.warn(f"fault on {obs.sv[j]}: the satellite is never used after its onset "
+                          "(below the mask, unhealthy or not observed); nothing injected",
+                          stacklevel=2)
+        inp["pseudorange_m"] = inp["pseudorange_m"] + np.where(inp["valid"], bias, 0.0)
+        inp["fault_epochs"] = int(hit.any(-1).sum())
         n_t = obs.t_gps_s.size
         p_sat = inp.get("p_sat", np.full(inp["valid"].shape, params["p_sat"]))
         cons = inp.get("constellation", np.zeros(inp["valid"].shape, np.int32))
@@ -436,6 +535,8 @@ class RinexReplay(Study):
                                    REPLAY_BUDGETS[params["budget"]],
                                    fault_modes=params["fault_modes"])
         out = replay_blocks(inp, truth, params, max_order, progress)
+        if params["fde"] == "off":
+            out = unmonitored(out)
         few = np.flatnonzero(out["mhss_status"] == araim.Status.TOO_FEW_SOURCES)
         if few.size:
             when = ", ".join(str(gpstime.to_datetime64(obs.t_gps_s[i]))[11:19] for i in few[:3])

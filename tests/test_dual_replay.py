@@ -24,8 +24,62 @@ def test_iono_free_factors_and_parse_ism():
     assert dual_replay.parse_ism("g", dual_replay.ISM_GALILEO_TEXT) == araim.ISM_GALILEO
     with pytest.raises(ValueError, match="g must be SIGMA_URA_M,B_NOM_M,P_SAT,P_CONST"):
         dual_replay.parse_ism("g", "1,2")
-    with pytest.raises(ValueError, match="gps_pair"):
+    with pytest.raises(ValueError, match="gps_pair must be one of l1l5, l1l5-raw, l1l2"):
         dfq.iono_free(None, gps_pair="l2l5")
+
+
+def _table(c1c, c2w, c5q):
+    """A GPS-only observation table of three satellites from (T, 3) code arrays."""
+    from oaraim.geometry.observation_table import ObservationTable
+
+    t = np.arange(c1c.shape[0]) * 30.0
+    return ObservationTable(t, np.array(["G01", "G02", "G03"]), {"G": ("C1C", "C2W", "C5Q")},
+                            {"C1C": c1c, "C2W": c2w, "C5Q": c5q}, {}, np.arange(t.size),
+                            np.zeros(t.size, int), None, 30.0, 3.04, "TEST", ("x",))
+
+
+def test_l5_offsets_refer_l1l5_to_l1l2_by_hand():
+    """Codes built from one range r and per-signal biases: P_IF(L1/L5) - P_IF(L1/L2) =
+    g15 b1 - h15 b5 - (g12 b1 - h12 b2) with g = f1^2/(f1^2 - f2^2), h = f2^2/(f1^2 - f2^2)
+    (ionosphere removed by both). G01: b = (0, 0, 2) m -> -h15 2 = -2.522 m; G02 never has
+    C2W (offset NaN, L1/L5 uncorrected); G03 has no L5 (L1/L2). After the offset, G01's L1/L5
+    equals its L1/L2 to the noise: the L1/L2 reference of the LNAV clock."""
+    rng = np.random.default_rng(1)
+    r = 2.2e7 + np.zeros((50, 3))
+    iono_l1 = 5.0 + rng.normal(0, 0.1, (50, 1))  # metres on L1, scaled by (f1/f)^2
+    f1, f2, f5 = dfq.F_L1_HZ, dfq.F_L2_HZ, dfq.F_L5_HZ
+    b1, b2, b5 = 0.0, 0.0, np.array([2.0, 0.0, 0.0])
+    c1c = r + iono_l1 + b1
+    c2w = r + iono_l1 * (f1 / f2) ** 2 + b2
+    c5q = r + iono_l1 * (f1 / f5) ** 2 + b5
+    c2w[:, 1] = np.nan
+    c5q[:, 2] = np.nan
+    tab = _table(c1c, c2w, c5q)
+    h15 = f5**2 / (f1**2 - f5**2)
+    off = dfq.l5_offsets_m(tab)
+    assert off[0] == pytest.approx(-h15 * 2.0, abs=1e-6) == pytest.approx(-2.522, abs=1e-3)
+    assert np.isnan(off[1]) and np.isnan(off[2])
+    iof = dfq.iono_free(tab)
+    np.testing.assert_array_equal(iof.combination[0], [dfq.GPS_L1L5, dfq.GPS_L1L5,
+                                                       dfq.GPS_L1L2])
+    np.testing.assert_allclose(iof.pseudorange_m[:, 0], r[:, 0], atol=1e-6)  # bias removed
+    np.testing.assert_allclose(iof.pseudorange_m[:, 2], r[:, 2], atol=1e-6)
+    raw = dfq.iono_free(tab, "l1l5-raw")
+    np.testing.assert_allclose(raw.pseudorange_m[:, 0], r[:, 0] - h15 * 2.0, atol=1e-6)
+    assert np.isnan(raw.l5_offset_m).all() and np.isnan(iof.l5_offset_m[1])
+
+
+def test_uncorrected_l1l5_biases_break_the_real_day(shared_data):
+    """Without the L1/L5 offsets (l1l5-raw) the TLSE hour has metres of inter-signal bias
+    between GPS blocks (IIF +4.9 to +7.4 m, III -1.1 to -0.3 m against L1/L2): the MHSS
+    detects at every epoch; referred to L1/L2 (the default) it detects nothing."""
+    raw = _run(shared_data, TLSE, 120, gps_pair="l1l5-raw").metrics
+    ref = _run(shared_data, TLSE, 120).metrics
+    assert raw["detections_mhss"] == 120 and ref["detections_mhss"] == 0
+    assert raw["gps_l5_uncorrected"] and not ref["gps_l5_uncorrected"]
+    off = ref["gps_l5_offset_removed_m"]
+    assert off["G10"] == pytest.approx(7.39, abs=0.05) and off["G23"] == pytest.approx(
+        -0.31, abs=0.05)
 
 
 def _run(shared_data, files, n, **sets):
@@ -36,14 +90,15 @@ def _run(shared_data, files, n, **sets):
 
 
 @pytest.mark.parametrize(("files", "pinned"), [
-    # TLSE 2024-01-01 18:00-19:00 (120 epochs): GPS L1/L5 32 %, L1/L2 26 %, E1/E5a 42 %
-    (TLSE, {"hpe_median_m": 1.295, "hpe_max_m": 2.155, "vpe_median_m": 0.561,
-            "vpe_max_m": 2.890, "hpl_median_m": 12.16, "vpl_median_m": 16.93,
-            "lpv200_available_pct": 97.5}),
+    # TLSE 2024-01-01 18:00-19:00 (120 epochs): GPS L1/L5 32 %, L1/L2 26 %, E1/E5a 42 %;
+    # L1/L5 referred to L1/L2 (dual_frequency.l5_offsets_m), ED-259A airborne model
+    (TLSE, {"hpe_median_m": 0.769, "hpe_max_m": 1.627, "vpe_median_m": 1.067,
+            "vpe_max_m": 1.973, "hpl_median_m": 11.85, "vpl_median_m": 15.21,
+            "lpv200_available_pct": 100.0, "detections_mhss": 0}),
     # NIST 2023-01-01, its first 120 epochs: GPS L1/L5 21 %, L1/L2 29 %, E1/E5a 50 %
-    (NIST, {"hpe_median_m": 0.601, "hpe_max_m": 2.085, "vpe_median_m": 2.453,
-            "vpe_max_m": 4.600, "hpl_median_m": 10.04, "vpl_median_m": 12.50,
-            "lpv200_available_pct": 100.0}),
+    (NIST, {"hpe_median_m": 0.414, "hpe_max_m": 1.512, "vpe_median_m": 0.801,
+            "vpe_max_m": 2.990, "hpl_median_m": 9.410, "vpl_median_m": 11.34,
+            "lpv200_available_pct": 100.0, "detections_mhss": 0}),
 ], ids=["TLSE", "NIST"])
 def test_dual_frequency_replay_by_default(shared_data, files, pinned):
     """Only obs and nav given: GPS + Galileo dual-frequency is chosen, 0 misleading epochs,
