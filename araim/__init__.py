@@ -137,3 +137,31 @@ from oaraim.araim.filter_monitor import (  # noqa: E402
 
 __all__ += ["FilterMonitorEpoch", "LinearModel", "filter_monitor", "run_ekf_monitor",
             "run_linear_monitor", "separation_monitor"]
+
+# What the other layers use, through this face only (tools/structure.py: "imports past a
+# package's face"); ``mhss``, ``availability`` and ``integrity_risk`` are namespaces.
+from oaraim.araim import availability, integrity_risk, mhss  # noqa: E402
+from oaraim.araim.added_source import added_source_slope_max  # noqa: E402
+from oaraim.araim.fault_modes import fault_mode_rule, fault_modes_batch_last  # noqa: E402
+from oaraim.araim.mhss import required_order  # noqa: E402
+from oaraim.araim.slopes import slope_hpl_tiled  # noqa: E402
+from oaraim.araim.validate import (  # noqa: E402
+    check_int,
+    check_positive,
+    check_probability,
+    check_range,
+)
+
+__all__ += ["added_source_slope_max", "availability", "check_int", "check_positive",
+            "check_probability", "check_range", "ekf_replay", "fault_mode_rule",
+            "fault_modes_batch_last", "integrity_risk", "mhss", "required_order",
+            "slope_hpl_tiled"]
+
+
+def __getattr__(name):
+    # ``ekf_replay`` reads recordings (pandas, ~0.5 s to import): loaded on first use (PEP 562)
+    if name == "ekf_replay":
+        import importlib
+
+        return importlib.import_module("oaraim.araim.ekf_replay")
+    raise AttributeError(f"module 'oaraim.araim' has no attribute {name!r}")

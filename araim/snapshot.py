@@ -125,7 +125,7 @@ def _enu_axes(x, frame_ecef):
     """(..., 3, 3) ENU rotation at ECEF points x, or the identity in an ENU frame."""
     if not frame_ecef:
         return jnp.broadcast_to(jnp.eye(3), x.shape[:-1] + (3, 3))
-    from oaraim.geometry.frames import ecef_to_geodetic, enu_rotation
+    from oaraim.geometry import ecef_to_geodetic, enu_rotation
 
     lat, lon, _ = ecef_to_geodetic(x)
     return enu_rotation(lat, lon)

@@ -50,17 +50,22 @@ __all__ = [
 
 # The recordings' readers and writers need pandas (~0.5 s to import): ``recording`` and its
 # names load on first use (PEP 562), so `import oaraim.geometry` does not pay for them.
-_RECORDING_NAMES = ("Recording", "RecordingError", "gnss_matrix",
-                    "load_recording", "pseudorange_matrix", "tower_clock_m", "write_recording")
-__all__ += ["recording", *_RECORDING_NAMES]
+_RECORDING_NAMES = ("FORMAT_NAME", "FORMAT_VERSION", "Recording", "RecordingError",
+                    "gnss_matrix", "load_recording", "pseudorange_matrix", "tower_clock_m",
+                    "validate_recording", "write_recording")
+#: ``epoch_geometry`` reads recordings too: the same, for its module and ``EpochGeometry``
+_EPOCH_GEOMETRY_NAMES = ("EpochGeometry",)
+__all__ += ["recording", *_RECORDING_NAMES, "epoch_geometry", *_EPOCH_GEOMETRY_NAMES]
 
 
 def __getattr__(name):
-    if name == "recording" or name in _RECORDING_NAMES:
-        import importlib
+    import importlib
 
-        module = importlib.import_module("oaraim.geometry.recording")
-        return module if name == "recording" else getattr(module, name)
+    for module_name, names in (("recording", _RECORDING_NAMES),
+                               ("epoch_geometry", _EPOCH_GEOMETRY_NAMES)):
+        if name == module_name or name in names:
+            module = importlib.import_module(f"oaraim.geometry.{module_name}")
+            return module if name == module_name else getattr(module, name)
     raise AttributeError(f"module 'oaraim.geometry' has no attribute {name!r}")
 
 
@@ -103,3 +108,13 @@ from oaraim.geometry.leo import (  # noqa: E402
 
 __all__ += ["LEO_PRESETS", "TleConstellation", "TleFileError", "WalkerConstellation",
             "WalkerShell", "combine_skies", "leo", "leo_constellation", "leo_sky"]
+
+# What the other layers use, through this face only (tools/structure.py: "imports past a
+# package's face"); ``frames`` and ``dual_frequency`` are namespaces.
+from oaraim.geometry import dual_frequency, frames  # noqa: E402
+from oaraim.geometry.ephemeris import check_navigation_file  # noqa: E402
+from oaraim.geometry.sky import azimuth, elevation, line_of_sight, resolve_source  # noqa: E402
+from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair  # noqa: E402
+
+__all__ += ["MIN_SEPARATION_M", "azimuth", "check_navigation_file", "dual_frequency",
+            "elevation", "first_near_pair", "frames", "line_of_sight", "resolve_source"]

@@ -41,3 +41,22 @@ __all__ = [
     "write_json",
     "write_results",
 ]
+
+# What the other layers use, through this face only (tools/structure.py: "imports past a
+# package's face"); ``checkpoint`` is a namespace.
+from oaraim.mc import checkpoint  # noqa: E402
+from oaraim.mc.keys import MAX_REALIZATIONS, cell_key, check_seed  # noqa: E402
+from oaraim.mc.progress import ProgressBar  # noqa: E402
+from oaraim.mc.runner import DEFAULT_CHUNK  # noqa: E402
+from oaraim.mc.store import (  # noqa: E402
+    OutputError,
+    OutputLock,
+    check_output_folder,
+    os_error_line,
+    writing,
+)
+from oaraim.mc.sweep_store import remove_if_nothing_finished  # noqa: E402
+
+__all__ += ["DEFAULT_CHUNK", "MAX_REALIZATIONS", "OutputError", "OutputLock", "ProgressBar",
+            "cell_key", "check_output_folder", "check_seed", "checkpoint", "os_error_line",
+            "remove_if_nothing_finished", "writing"]

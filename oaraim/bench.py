@@ -15,8 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import geometry, reference, reference_mhss
-from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import slope_hpl_tiled
+from oaraim.araim import lambda_det_table, slope_hpl_tiled
 
 
 def host_info() -> dict:
@@ -217,7 +216,7 @@ def profile_mhss(batch=65_536, repeats=3):
     """Where the MHSS time goes: fault modes, projectors (eqs. 9-12) and PL root finding, in CPU
     seconds of cumulative stages (each stage timed on its own, differences reported)."""
     from oaraim import araim
-    from oaraim.araim.fault_modes import FaultModeRule, fault_modes_batch_last
+    from oaraim.araim import FaultModeRule, fault_modes_batch_last
     from oaraim.araim.mhss import PL_ITERATIONS, batch_last_inputs, pls_from_projection, project
     from oaraim.batching import jit_kernel, map_tiles
 
@@ -428,7 +427,7 @@ def bench_availability_map(sets=None, workers=None):
     import tempfile
 
     from oaraim.execute import run_sweep_study
-    from oaraim.mc.sweep import Execution
+    from oaraim.mc import Execution
     from oaraim.registry import STUDIES
 
     study = STUDIES["availability-map"]

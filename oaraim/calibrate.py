@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.mc.keys import check_seed
+from oaraim.mc import check_seed
 
 #: relative step of the sensitivity differences (+-5 %)
 SENSITIVITY_STEP = 0.05

@@ -119,7 +119,7 @@ def run(
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
     from oaraim.execute import run_study
-    from oaraim.mc.sweep import Execution
+    from oaraim.mc import Execution
 
     _trust(trust_data)
 
@@ -195,7 +195,7 @@ def report(
         _fail(f"no study results under {out_dir}; run `oaraim run STUDY --out {out_dir}` first")
     print(text)
     if write is not None:
-        from oaraim.mc.store import os_error_line, writing
+        from oaraim.mc import os_error_line, writing
 
         try:
             write.parent.mkdir(parents=True, exist_ok=True)
@@ -242,8 +242,7 @@ def reproduce(
               "writes only under --out)")
     if jobs < 1:
         _fail(f"--jobs must be >= 1, got {jobs}")
-    from oaraim.mc.keys import check_seed
-    from oaraim.mc.store import OutputError, check_output_folder, os_error_line, writing
+    from oaraim.mc import OutputError, check_output_folder, check_seed, os_error_line, writing
 
     try:  # once, not one failure per study
         check_seed(seed)
@@ -340,7 +339,7 @@ def _run_studies(names, jobs, **kw):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from oaraim.mc.progress import ProgressBar
+    from oaraim.mc import ProgressBar
 
     order = sorted(names, key=lambda n: -STUDIES[n].quick_cost_s)
     show, kw = kw["show_progress"], {**kw, "show_progress": False}

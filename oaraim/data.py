@@ -524,7 +524,7 @@ def _check_downloaded_nav(p: Path, url: str, date: str) -> None:
     page, a truncated transfer) before it is cached: the structural check the navigation
     reader itself runs first (``geometry.ephemeris.check_navigation_file``), so a file kept
     here is one ``--set nav=PATH`` can read."""
-    from oaraim.geometry.ephemeris import NavigationFileError, check_navigation_file
+    from oaraim.geometry import NavigationFileError, check_navigation_file
 
     with open(p, "rb") as f:
         head = f.read(40)

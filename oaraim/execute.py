@@ -5,18 +5,18 @@ import sys
 import time
 from pathlib import Path
 
-from oaraim.mc.checkpoint import Checkpoint, identity
-from oaraim.mc.keys import check_seed
-from oaraim.mc.progress import ProgressBar
-from oaraim.mc.store import (
+from oaraim.mc import (
+    Execution,
     OutputError,
     OutputLock,
+    ProgressBar,
+    check_seed,
     os_error_line,
     provenance,
     write_results,
     writing,
 )
-from oaraim.mc.sweep import Execution
+from oaraim.mc.checkpoint import Checkpoint, identity
 from oaraim.registry import STUDIES, get_study
 from oaraim.studies import base
 from oaraim.studies.base import ResumableStudy, SweepStudy

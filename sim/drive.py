@@ -15,10 +15,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from oaraim.araim import RaimConfig
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.ekf_raim import (
     InitialUncertainty,
-    RaimConfig,
     RaimEpoch,
     RaimTables,
     initial_covariance,

@@ -37,15 +37,17 @@ import pandas as pd
 
 from oaraim.araim import error_models
 from oaraim.constants import C_M_S
-from oaraim.geometry import frames, gpstime
-from oaraim.geometry.epoch_geometry import EpochGeometry
-from oaraim.geometry.recording import (
+from oaraim.geometry import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    EpochGeometry,
     Recording,
+    frames,
+    gpstime,
+    look_angles,
+    satellites,
     validate_recording,
 )
-from oaraim.geometry.sky import look_angles, satellites
 from oaraim.mc import stream
 from oaraim.sim.measurement import (
     ErrorModel,

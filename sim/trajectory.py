@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.constants import STANDARD_GRAVITY_MPS2
-from oaraim.geometry.frames import normal_gravity_mps2
+from oaraim.geometry import normal_gravity_mps2
 from oaraim.sim.measurement import ErrorModel
 
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from oaraim.araim.validate import check_int, check_positive, check_probability, check_range
+from oaraim.araim import check_int, check_positive, check_probability, check_range
 
 
 @dataclass(frozen=True)
@@ -311,7 +311,7 @@ class SweepStudy(Study):
     def realization_limit(self) -> int | None:
         """2^32 per cell: chunked to disk (``mc.sweep``), bound only by the 32-bit index of a
         realization in its key (``mc.keys.MAX_REALIZATIONS``)."""
-        from oaraim.mc.keys import MAX_REALIZATIONS
+        from oaraim.mc import MAX_REALIZATIONS
 
         return MAX_REALIZATIONS
 
@@ -326,7 +326,7 @@ class SweepStudy(Study):
     def axes(self, params) -> tuple:
         """The grid: one ``mc.sweep.Axis`` per name of ``axis_names``, with the values of the
         parameter of that name (a tuple, parsed by ``axis(...)``)."""
-        from oaraim.mc.sweep import Axis
+        from oaraim.mc import Axis
 
         return tuple(Axis(k, tuple(params[k])) for k in self.axis_names)
 
@@ -348,7 +348,7 @@ class SweepStudy(Study):
 
     def chunk_size(self, params) -> int:
         """Realizations per task and chunk file (never changes a result)."""
-        from oaraim.mc.runner import DEFAULT_CHUNK
+        from oaraim.mc import DEFAULT_CHUNK
 
         return int(params.get(self.chunk_param, DEFAULT_CHUNK))
 
@@ -356,7 +356,7 @@ class SweepStudy(Study):
         """Keys per kernel call, the one shape the kernel is compiled for (a multiple of
         mc.reduce.BLOCK). XLA may round differently at another batch shape, so this is part of
         a run's identity (a resume must use the same). Override for bigger calls."""
-        from oaraim.mc.reduce import BLOCK
+        from oaraim.mc import BLOCK
 
         return BLOCK
 
@@ -400,8 +400,7 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
     kernel; ``oaraim.execute`` passes one that Dask workers look up by study name. A run
     that fails before any chunk is finished removes ``sweep.json`` and ``chunks/`` again.
     """
-    from oaraim.mc.sweep import Execution, Storage, run_sweep
-    from oaraim.mc.sweep_store import remove_if_nothing_finished
+    from oaraim.mc import Execution, Storage, remove_if_nothing_finished, run_sweep
 
     execution = Execution() if execution is None else execution
     if execution.chunk_size is None:
@@ -427,7 +426,7 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
 def fault_modes_param(default, why):
     """The ``fault_modes`` parameter of a study that runs the MHSS receiver: the convention
     (``araim.FaultModeRule``, docs/conformance.md), with the study's reason for its default."""
-    from oaraim.araim.fault_modes import CONVENTIONS
+    from oaraim.araim import FAULT_MODE_CONVENTIONS as CONVENTIONS
 
     return Param(default, parse_choice(*CONVENTIONS),
                  f"fault-mode convention: {', '.join(CONVENTIONS)} (docs/conformance.md); "

@@ -31,9 +31,9 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry, mc
+from oaraim.araim import IntegrityBudget
 from oaraim.araim import integrity_risk as ir
-from oaraim.araim.budget import IntegrityBudget
-from oaraim.mc.sweep import Values
+from oaraim.mc import Values
 from oaraim.studies.base import (
     Param,
     StudyResult,
@@ -351,7 +351,7 @@ class IntegrityRisk(SweepStudy):
     def finish(self, params, ds, realizations, seed):
         """Measured risk per geometry against the allocation (with and without the
         unmonitored modes), the crude Monte Carlo cross-check and the SOP tower ramps."""
-        from oaraim.mc.keys import cell_key
+        from oaraim.mc import cell_key
 
         G, S, X = params["geometries"], n_scenarios(params), 2 * len(params["x_grid"])
         n_sops = list(params["n_sops"])

@@ -51,9 +51,8 @@ import numpy as np
 import xarray as xr
 
 from oaraim import araim, data, geometry
-from oaraim.araim import snapshot
+from oaraim.araim import required_order, snapshot
 from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
-from oaraim.araim.mhss import required_order
 from oaraim.constants import C_M_S
 from oaraim.geometry import gpstime, rinex_obs
 from oaraim.studies.base import (

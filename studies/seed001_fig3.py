@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
-from oaraim.araim.added_source import added_source_slope_max
+from oaraim.araim import added_source_slope_max
 from oaraim.mc import Histogram, run_chunked
 from oaraim.studies.base import Param, Study, StudyResult, count, in_range, positive
 from oaraim.studies.common import params as shared

@@ -26,8 +26,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
-from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import slopes_kernel
+from oaraim.araim import lambda_det_table, slopes_kernel
 from oaraim.mc import EmpiricalCDF, Mean, run_chunked
 from oaraim.studies.base import (
     Calibration,

@@ -34,8 +34,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
-from oaraim.araim.chi2 import lambda_det_table
-from oaraim.araim.slopes import slope_hpl_kernel
+from oaraim.araim import lambda_det_table, slope_hpl_kernel
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
     Calibration,

@@ -25,7 +25,7 @@ has the all-in-view position and contributes nothing at these PLs.
 import numpy as np
 import xarray as xr
 
-from oaraim.mc.sweep import Count, Mean, Min
+from oaraim.mc import Count, Mean, Min
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, positive, probability
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.seed004 import TOL_M, Fig4Cell

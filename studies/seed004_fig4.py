@@ -29,7 +29,7 @@ only when the run's grid holds every cell the finding is about (``graded``); on 
 import numpy as np
 import xarray as xr
 
-from oaraim.mc.sweep import Count, Mean
+from oaraim.mc import Count, Mean
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive, probability
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.plotting import (

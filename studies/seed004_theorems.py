@@ -34,13 +34,10 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
+from oaraim.araim import Sources, Status, fault_mode_rule, separation_kernel
 from oaraim.araim.error_models import gnss_variances, sop_variances
-from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.fde import separation_kernel
-from oaraim.araim.mhss import Sources
-from oaraim.araim.status import Status
 from oaraim.batching import jit_kernel
-from oaraim.mc.sweep import Count, Max, Mean, Min
+from oaraim.mc import Count, Max, Mean, Min
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, fault_modes_param
 from oaraim.studies.common import seed004 as c
 

@@ -31,8 +31,8 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.batching import jit_kernel
+from oaraim.mc import realization_keys
 from oaraim.mc.checkpoint import counted_unit
-from oaraim.mc.keys import realization_keys
 from oaraim.studies.base import Param, ResumableStudy, axis, count, positive, probability
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.seed004 import TOL_M

@@ -87,3 +87,49 @@ def test_the_check_finds_what_it_looks_for(structure, tmp_path):
     assert rep["cycles"] == [["pkg.a", "pkg.sub.b"]]
     assert [m for m, _ in rep["over_max_lines"]] == ["pkg.sub.b"]
     assert rep["undocumented"] == ["pkg.a.f", "pkg.c.C.m", "pkg.sub.b.g"]
+
+
+def test_no_module_imports_past_a_package_face(rep):
+    """araim, geometry, sim and mc are entered through their ``__init__`` only: a study, the
+    app or another layer never imports one of their submodules (namespaces the face lists,
+    such as ``araim.error_models``, excepted), and each finding names the import to write."""
+    assert rep["face_bypasses"] == []
+
+
+def test_the_face_rule_finds_every_way_past_a_face(structure, tmp_path):
+    """On a made-up tree: a name imported from a submodule, a name the face exports imported
+    through a namespace, and a submodule reached as an attribute of the package are found, each
+    with the import to write; the face's own names, its namespaces, a namespace's own names and
+    imports inside the layer are not."""
+    (tmp_path / "pyproject.toml").write_text(textwrap.dedent("""
+        [tool.setuptools.package-dir]
+        "oaraim" = "oaraim"
+        "oaraim.araim" = "araim"
+        "oaraim.studies" = "studies"
+    """))
+    for folder in ("oaraim", "araim", "studies"):
+        (tmp_path / folder).mkdir()
+    (tmp_path / "oaraim" / "__init__.py").write_text("")
+    (tmp_path / "araim" / "__init__.py").write_text(
+        "from oaraim.araim import ns\nfrom oaraim.araim.core import f\nfrom oaraim.araim.ns import"
+        " k\n__all__ = ['f', 'k', 'ns']\n")
+    (tmp_path / "araim" / "core.py").write_text("from oaraim.araim.hidden import h\nf = h\n")
+    (tmp_path / "araim" / "ns.py").write_text("g = 1\nk = 2\n")
+    (tmp_path / "araim" / "hidden.py").write_text("h = 3\n")
+    (tmp_path / "studies" / "__init__.py").write_text("")
+    (tmp_path / "studies" / "a.py").write_text(textwrap.dedent("""
+        from oaraim import araim
+        from oaraim.araim import f, ns
+        from oaraim.araim.core import f as f2
+        from oaraim.araim.ns import g, k
+
+        x = araim.hidden.h + araim.ns.g + ns.g + f + f2 + g + k
+    """))
+    found = structure.report(tmp_path)["face_bypasses"]
+    assert [line.split(" -> ")[0] for line in found] == [
+        "oaraim.studies.a:4: from oaraim.araim.core import f",
+        "oaraim.studies.a:5: from oaraim.araim.ns import k",
+        "oaraim.studies.a:7: araim.hidden",
+    ]
+    assert "`from oaraim import araim` and `araim.f`" in found[0]
+    assert "export each NAME in araim/__init__.py" in found[2]

@@ -20,6 +20,14 @@ with ``ast`` and imports nothing, so it also runs on a tree that does not import
 - A *layer violation* is an import between layers that ``LAYERS`` does not allow (the table
   docs/design.md draws): each module belongs to one layer (``layer_of``), and a layer may import
   itself and the layers listed for it, nothing else.
+- A *face bypass* is a module outside one of the ``FACED`` layers (``araim``, ``geometry``,
+  ``sim``, ``mc``) that imports one of that layer's submodules (``from oaraim.araim.mhss import
+  required_order``, ``from oaraim.araim import fde``) or reaches one through the package
+  (``araim.mhss.required_order`` after ``from oaraim import araim``): the package's
+  ``__init__`` is the only way in, so what another layer needs is exported there
+  (``araim.required_order``). A submodule the face itself imports as a module and lists in
+  ``__all__`` is a public namespace (``araim.error_models``, ``sim.measurement``) and may be
+  used as one. Each finding names the import to write instead.
 - The *largest file* is counted in lines; the rule is at most ``MAX_LINES``.
 - An *undocumented* name is a public function or class at the top level of a public module, or
   a public method of such a class, without a docstring (``ast.get_docstring``). A module is
@@ -58,6 +66,8 @@ LAYERS = {
             "oracles", "batching"},                         # cli, execute, registry, report, bench
 }
 _SUBPACKAGE_LAYERS = ("geometry", "araim", "mc", "sim", "studies")
+#: the layers whose package ``__init__`` is the only way in for every other layer
+FACED = ("araim", "geometry", "sim", "mc")
 
 
 def layer_of(module: str) -> str:
@@ -104,7 +114,9 @@ def _resolve(node: ast.ImportFrom, module: str, is_package: bool) -> str:
 
 def scan(root: Path = ROOT):
     """(edges, private, sizes): module -> imported package modules; the private cross-file
-    imports as (module, line, text); module -> line count."""
+    imports as (module, line, text); module -> line count. ``scan.reaches`` (set by the call)
+    holds every (module, line, target module, text) of an import of a package module or an
+    attribute reach ``alias.sub`` to one, for ``face_bypasses``."""
     mods = modules(root)
     known = set(mods)
 
@@ -117,6 +129,7 @@ def scan(root: Path = ROOT):
 
     edges: dict[str, set[str]] = {m: set() for m in mods}
     private: list[tuple[str, int, str]] = []
+    reaches: list[tuple[str, int, str, str]] = []
     sizes = {}
     for mod, path in mods.items():
         text = path.read_text()
@@ -130,6 +143,7 @@ def scan(root: Path = ROOT):
                     tgt = owner(a.name)
                     if tgt and tgt != mod:
                         edges[mod].add(tgt)
+                        reaches.append((mod, node.lineno, tgt, f"import {a.name}"))
                         if a.asname:
                             aliases[a.asname] = tgt
             elif isinstance(node, ast.ImportFrom):
@@ -139,21 +153,29 @@ def scan(root: Path = ROOT):
                     if full in known:  # from package import module
                         if full != mod:
                             edges[mod].add(full)
+                            reaches.append((mod, node.lineno, full, f"from {src} import {a.name}"))
                         aliases[a.asname or a.name] = full
                         continue
                     tgt = owner(src)
                     if tgt is None or tgt == mod:
                         continue
                     edges[mod].add(tgt)
+                    reaches.append((mod, node.lineno, tgt, f"from {src} import {a.name}"))
                     if _is_private(a.name) and not _gathers(mod, is_pkg, tgt):
                         private.append((mod, node.lineno, f"from {src} import {a.name}"))
         for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in aliases
+                    and f"{aliases[node.value.id]}.{node.attr}" in known):
+                reaches.append((mod, node.lineno, f"{aliases[node.value.id]}.{node.attr}",
+                                f"{node.value.id}.{node.attr}"))
             if (isinstance(node, ast.Attribute) and _is_private(node.attr)
                     and isinstance(node.value, ast.Name) and node.value.id in aliases
                     and aliases[node.value.id] != mod):
                 tgt = aliases[node.value.id]
                 if not _gathers(mod, is_pkg, tgt):
                     private.append((mod, node.lineno, f"{node.value.id}.{node.attr}"))
+    scan.reaches = sorted(set(reaches))
     return edges, sorted(set(private)), sizes
 
 
@@ -164,6 +186,87 @@ def _is_private(name: str) -> bool:
 def _gathers(mod: str, is_pkg: bool, target: str) -> bool:
     """A package __init__ taking a name from one of its own (private) modules."""
     return is_pkg and target.startswith(mod + ".")
+
+
+def face_names(root: Path = ROOT) -> dict[str, set[str]]:
+    """Faced package -> the names its ``__init__`` lists in ``__all__``."""
+    mods = modules(root)
+    out = {}
+    for layer in FACED:
+        face = f"oaraim.{layer}"
+        out[face] = set()
+        if face not in mods:
+            continue
+        out[face] = _listed(ast.parse(mods[face].read_text()))
+    return out
+
+
+def _listed(tree: ast.Module) -> set[str]:
+    """The names of ``__all__ = [...]`` and ``__all__ += [...]`` at a module's top level."""
+    out, tuples = set(), {}
+    for node in tree.body:
+        targets = (node.targets if isinstance(node, ast.Assign)
+                   else [node.target] if isinstance(node, ast.AugAssign) else [])
+        if not hasattr(getattr(node, "value", None), "elts"):
+            continue
+        names = {e.value for e in node.value.elts if isinstance(e, ast.Constant)}
+        for e in node.value.elts:  # ``*_LAZY_NAMES``: a tuple of names assigned above
+            if isinstance(e, ast.Starred) and isinstance(e.value, ast.Name):
+                names |= tuples.get(e.value.id, set())
+        for x in targets:
+            if getattr(x, "id", None) == "__all__":
+                out |= names
+            elif isinstance(x, ast.Name):
+                tuples[x.id] = names
+    return out
+
+
+def namespaces(root: Path = ROOT) -> set[str]:
+    """The submodules a faced package's ``__init__`` imports as modules under their own name
+    and lists in ``__all__``: its public namespaces (``oaraim.araim.error_models``)."""
+    mods = modules(root)
+    out = set()
+    for layer in FACED:
+        face = f"oaraim.{layer}"
+        if face not in mods:
+            continue
+        tree = ast.parse(mods[face].read_text())
+        listed = _listed(tree)
+        for node in tree.body:
+            if isinstance(node, ast.ImportFrom) and node.module == face:
+                out |= {f"{face}.{a.name}" for a in node.names
+                        if a.asname is None and a.name in listed and f"{face}.{a.name}" in mods}
+    return out
+
+
+def face_bypasses(root: Path = ROOT) -> list[str]:
+    """Every import or attribute reach of a ``FACED`` layer's submodule from outside that
+    layer, as "module:line: what it wrote -> what to write"."""
+    scan(root)
+    public = namespaces(root)
+    exported = face_names(root)
+    out = []
+    for mod, line, target, text in scan.reaches:
+        layer = layer_of(target)
+        if layer not in FACED or layer_of(mod) == layer:
+            continue
+        face = f"oaraim.{layer}"
+        name = text.rsplit(" import ", 1)[-1] if " import " in text else text.split(".", 1)[1]
+        if target == f"{face}.{name}" and name in exported[face]:
+            continue  # the face exports a name spelled like its module (araim.slopes)
+        through_namespace = any(target == ns or target.startswith(ns + ".") for ns in public)
+        if target == face or (through_namespace and not (
+                text.startswith("from ") and name in exported[face])):
+            continue  # a namespace's own names; a name the face exports comes from the face
+        sub = target[len(face) + 1:]
+        if text.startswith(("from ", "import ")) and not target.endswith("." + name):
+            fix = (f"`from oaraim import {layer}` and `{layer}.{name}` (export {name} in "
+                   f"{layer}/__init__.py if it is not there)")
+        else:
+            fix = (f"`from oaraim import {layer}` and `{layer}.NAME` for what it uses of "
+                   f"{sub} (export each NAME in {layer}/__init__.py if it is not there)")
+        out.append(f"{mod}:{line}: {text} -> {fix}")
+    return out
 
 
 def undocumented(root: Path = ROOT) -> list[str]:
@@ -245,6 +348,7 @@ def report(root: Path = ROOT) -> dict:
         "over_max_lines": [[m, n] for m, n in largest if n > MAX_LINES],
         "max_lines": MAX_LINES,
         "undocumented": undocumented(root),
+        "face_bypasses": face_bypasses(root),
     }
 
 
@@ -273,8 +377,12 @@ def main(argv=None) -> int:
               f"{len(rep['undocumented'])}")
         for name in rep["undocumented"]:
             print("  " + name)
+        print(f"imports past a package's face ({', '.join(FACED)}): "
+              f"{len(rep['face_bypasses'])}")
+        for line in rep["face_bypasses"]:
+            print("  " + line)
     broken = (rep["private_imports"] or rep["cycles"] or rep["layer_violations"]
-              or rep["over_max_lines"] or rep["undocumented"])
+              or rep["over_max_lines"] or rep["undocumented"] or rep["face_bypasses"])
     return 1 if broken else 0
 
 

@@ -35,17 +35,19 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
+from oaraim.araim import (
+    PositionOptimization,
+    Sources,
+    Status,
+    fault_mode_rule,
+    protection_levels_kernel,
+    required_order,
+)
 from oaraim.araim import availability as av
-from oaraim.araim import linalg
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
-from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.mhss import Sources, protection_levels_kernel, required_order
-from oaraim.araim.position_opt import PositionOptimization
-from oaraim.araim.status import Status
-from oaraim.batching import jit_kernel, map_tiles
-from oaraim.geometry.ephemeris import GALILEO, GPS
-from oaraim.geometry.sky import azimuth, elevation, line_of_sight
-from oaraim.mc.sweep import Values
+from oaraim.batching import jit_kernel, map_tiles, materialize
+from oaraim.geometry import GALILEO, GPS, azimuth, elevation, line_of_sight
+from oaraim.mc import Values
 from oaraim.studies.availability_map.coastlines import parse_coastlines
 from oaraim.studies.availability_map.compare import coverage_table, pl_difference, point_maps
 from oaraim.studies.availability_map.inputs import (
@@ -188,7 +190,7 @@ def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mas
     take = lambda x: jnp.take_along_axis(x, order, -1)  # noqa: E731
     e, n, u, usable, vis = (take(x) for x in (e, n, u, usable, vis))
     # (stored: fused into the stack of the rows' components it ran twice per slot)
-    az = linalg.materialize(jnp.where(usable, azimuth(e, n), 0.0))
+    az = materialize(jnp.where(usable, azimuth(e, n), 0.0))
     el = jnp.where(usable, elevation(e, n, u), 0.0)
     const = jnp.take(sat_const, order)
     is_gps = const == GPS

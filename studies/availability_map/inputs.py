@@ -9,8 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from oaraim.geometry.frames import geodetic_to_ecef
-from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair
+from oaraim.geometry import MIN_SEPARATION_M, first_near_pair, geodetic_to_ecef
 from oaraim.studies.base import in_range, keyword_or_file, positive
 
 # ------------------------------------------------------------------------------------ grids
@@ -58,7 +57,7 @@ def parse_orbits(default_file):
     def parse(name, v):
         s = path_or_keyword(name, v)
         if s not in keywords:
-            from oaraim.geometry.sky import resolve_source
+            from oaraim.geometry import resolve_source
 
             resolve_source(s, (name,) if name in ("gps", "galileo") else ("gps", "galileo"))
         return s

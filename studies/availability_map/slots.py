@@ -12,8 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import data, geometry
-from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris
-from oaraim.geometry.sky import elevation, look_angles, resolve_source
+from oaraim.geometry import GALILEO, GPS, Ephemeris, elevation, look_angles, resolve_source
 from oaraim.studies.common import sky
 
 GPS_ALMANAC = "almanac/almmops.txt"

@@ -39,15 +39,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import geometry, mc
-from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
-from oaraim.araim.error_models import gnss_variances, sop_variances
-from oaraim.araim.fault_modes import fault_mode_rule
-from oaraim.araim.mhss import (
+from oaraim.araim import (
+    BUDGET_SEED004_TABLE_I,
     Sources,
+    fault_mode_rule,
     protection_levels_kernel,
     protection_levels_priors_kernel,
     required_order,
 )
+from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import jit_kernel
 from oaraim.geometry import gpstime
 from oaraim.studies.base import (
@@ -398,7 +398,7 @@ class Fig4Cell:
         """Compile, without running, the programs of a call with ``batch_size`` keys (the
         GPS-only and this cell's GPS + SOP kernels; ``mc.sweep`` warms the cells to come
         while the chunks run). Each program once per process."""
-        keys = mc.keys.realization_keys(0, 0, 0, batch_size)
+        keys = mc.realization_keys(0, 0, 0, batch_size)
         shape = (self.table["az_rad"].shape, self.fault_modes, batch_size)
         for kernel, args, program in (
                 (gps_kernel, _gps_args(keys, self.jtable, self.fault_modes), ("gps", *shape)),

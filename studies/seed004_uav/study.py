@@ -8,14 +8,10 @@ import numpy as np
 import xarray as xr
 
 from oaraim import araim, mc, sim
-from oaraim.araim import snapshot
-from oaraim.araim.budget import BUDGET_SEED004_TABLE_I
+from oaraim.araim import BUDGET_SEED004_TABLE_I, required_order, snapshot, solution_separation
 from oaraim.araim.error_models import gnss_variances, sop_variances
-from oaraim.araim.fde import solution_separation
-from oaraim.araim.mhss import required_order
 from oaraim.batching import TILE
-from oaraim.geometry import epoch_geometry, gpstime
-from oaraim.geometry.recording import load_recording
+from oaraim.geometry import epoch_geometry, gpstime, load_recording
 from oaraim.studies.base import (
     NO_RECORDING,
     Param,
