@@ -34,13 +34,21 @@ Per epoch (all batched over the T epochs, fixed shapes, no NaN; a failure is ``i
    solution and for each monitor's kept solution. Misleading information = HPE > HPL (inf
    never counts).
 
+Monitors are objects in a table (``MONITORS``): each has a ``name``, says whether it needs
+the MHSS fault-mode order (``needs_order``), and has one method, ``run(inputs, config) ->
+MonitorReplay``, where ``inputs`` is the ``ReplayInputs`` every monitor sees (the all-in-view
+solution, its rows and the epoch's data) and ``config`` the checked ``ReplayConfig`` (its
+``max_order`` resolved). Slope RAIM (``SlopeMonitor``) and the MHSS (``MhssMonitor``) are the
+first two; ``register_monitor`` adds another, which ``ReplayConfig(monitors=(..., name))``
+then runs (docs/contributing.md, "A new monitor").
+
 Frames: ``frame="ecef"`` (default): positions in WGS-84 ECEF, ENU axes at the solution (rows)
 and at the truth (errors). ``frame="enu"``: positions already in one local ENU frame (a
 simulation), the axes are the frame's own.
 """
 
 from functools import partial
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -116,6 +124,9 @@ class ReplayResult(NamedTuple):
     """MHSS solution separation (step 4); None if not in ``monitors``."""
     max_order: int
     """The MHSS fault-mode order used (0 without the MHSS)."""
+    monitors: dict | None = None
+    """Every monitor run, by name (``MONITORS``): slope and mhss (also the fields above) and
+    any registered one asked for."""
 
 
 # --------------------------------------------------------------------------- kernels
@@ -292,9 +303,10 @@ class ReplayConfig(NamedTuple):
     variant. Checked when the replay starts (a bad value raises ``ValueError`` naming it)."""
 
     monitors: tuple = ("slope", "mhss")
-    """Integrity monitors to run, among "slope" (seed 001 chi-square slope RAIM) and "mhss"
-    (seed 004 / ADD MHSS with exclusion); one left out is ``None`` in the result (the MHSS
-    compiles for tens of seconds per (L, C) shape on a 2-core CPU, slope RAIM in seconds)."""
+    """Integrity monitors to run, by their name in ``MONITORS``: "slope" (seed 001 chi-square
+    slope RAIM), "mhss" (seed 004 / ADD MHSS with exclusion) or one added by
+    ``register_monitor``; slope or mhss left out is ``None`` in the result (the MHSS compiles
+    for tens of seconds per (L, C) shape on a 2-core CPU, slope RAIM in seconds)."""
     budget: IntegrityBudget = BUDGET_SEED004_TABLE_I
     """MHSS integrity budget (default seed 004 Table I by its symbols)."""
     fault_modes: object = None
@@ -351,9 +363,10 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
     monitors, budget, fault_modes = config.monitors, config.budget, config.fault_modes
     max_order, p_fa, p_md = config.max_order, config.p_fa, config.p_md
     n_iter, frame = config.n_iter, config.frame
-    bad = set(monitors) - {"slope", "mhss"}
+    bad = set(monitors) - set(MONITORS)
     if bad or not monitors:
-        raise ValueError(f"monitors must be a non-empty subset of ('slope', 'mhss'), got "
+        raise ValueError(f"monitors must be a non-empty subset of {tuple(MONITORS)!r} (others "
+                         f"are added with araim.snapshot.register_monitor), got "
                          f"{tuple(monitors)!r}")
     if frame not in ("ecef", "enu"):
         raise ValueError(f"frame must be 'ecef' or 'enu', got {frame!r}")
@@ -398,21 +411,123 @@ def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
     used_epoch, used, g, err, hpe, vpe = _solution_terms(sol.position_m, tx, valid, sol.status,
                                                          truth, frame_ecef)
 
-    if max_order is None and "mhss" in monitors:
+    if max_order is None and any(MONITORS[name].needs_order for name in monitors):
         pc0 = np.broadcast_to(p_const, shape[:1] + (n_clocks,))
         max_order = required_order(used, jnp.asarray(cons), jnp.asarray(
             np.broadcast_to(np.asarray(p_sat, np.float64), shape)), jnp.asarray(pc0),
             budget, fault_modes=fault_modes)
-    slope = mhss = None
-    if "slope" in monitors:
-        slope = _slope_monitor(sol, g, sigma, used, cons, used_epoch, truth, p_fa, p_md,
-                               n_clocks, frame_ecef)
-    if "mhss" in monitors:
-        mhss = _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat,
-                             b_nom_m, p_const, budget, int(max_order), frame_ecef,
-                             fault_modes)
-    return ReplayResult(sol, g, used, err, hpe, vpe, slope, mhss,
-                        0 if max_order is None else int(max_order))
+    inputs = ReplayInputs(sol, g, used, used_epoch, cons, sigma, var_int, var_acc, p_sat,
+                          b_nom_m, p_const, truth, frame_ecef, err, hpe, vpe)
+    checked = config._replace(p_fa=p_fa, p_md=p_md,
+                              max_order=None if max_order is None else int(max_order))
+    runs = {name: MONITORS[name].run(inputs, checked) for name in monitors}
+    return ReplayResult(sol, g, used, err, hpe, vpe, runs.get("slope"), runs.get("mhss"),
+                        0 if max_order is None else int(max_order), runs)
+
+
+class ReplayInputs(NamedTuple):
+    """What every replay monitor sees (host arrays, T epochs of L sources): the all-in-view
+    solution and the epoch's data, as ``replay`` checked them."""
+
+    sol: WNLSResult
+    """The all-in-view WNLS solution (``residual_m`` (T, L), ``position_m`` (T, 3))."""
+    g_enu: jax.Array
+    """(T, L, 3) geometry rows in the ENU frame at the solution (0 for unused sources)."""
+    used: jax.Array
+    """(T, L) bool: the sources used (valid, and the epoch solvable)."""
+    used_epoch: jax.Array
+    """(T,) bool: the epoch's WNLS converged (``Status.OK``)."""
+    constellation: np.ndarray
+    """(T, L) int32 clock groups 0..C-1."""
+    sigma_m: np.ndarray
+    """(T, L) slope RAIM sigmas, m (``slope_sigma_m`` or sqrt(var_int_m2))."""
+    var_int_m2: np.ndarray
+    """(T, L) integrity variances, m^2."""
+    var_acc_m2: np.ndarray
+    """(T, L) accuracy variances, m^2."""
+    p_sat: object
+    """P_s per source, broadcastable to (T, L)."""
+    b_nom_m: object
+    """b_nom per source, m, broadcastable to (T, L)."""
+    p_const: np.ndarray
+    """(C,) P_const per clock group."""
+    truth_m: np.ndarray
+    """(T, 3) true receiver position, frame of the inputs."""
+    frame_ecef: bool
+    """Whether positions are ECEF (else one local ENU frame)."""
+    error_enu_m: jax.Array
+    """(T, 3) the all-in-view solution's error in the ENU frame at the truth, m (inf where
+    the WNLS failed): a monitor that keeps that solution reports it as its own."""
+    hpe_m: jax.Array
+    """(T,) its horizontal error, m."""
+    vpe_m: jax.Array
+    """(T,) its vertical error, m."""
+
+
+class Monitor(Protocol):
+    """A replay monitor: what ``register_monitor`` takes."""
+
+    name: str
+    """Its key in ``MONITORS`` and in ``ReplayConfig.monitors``; metrics use it as suffix."""
+    needs_order: bool
+    """Whether it reads ``config.max_order`` (then ``replay`` resolves a None order)."""
+
+    def run(self, inputs: ReplayInputs, config: ReplayConfig) -> MonitorReplay:
+        """The monitor over the T epochs: one ``MonitorReplay``, finite or inf, no NaN."""
+
+
+class SlopeMonitor(NamedTuple):
+    """Chi-square slope RAIM with single-source exclusion (module docstring, step 3)."""
+
+    name: str = "slope"
+    needs_order: bool = False
+
+    def run(self, inputs: ReplayInputs, config: ReplayConfig) -> MonitorReplay:
+        """Slope RAIM at ``config.p_fa`` / ``config.p_md``."""
+        i = inputs
+        return _slope_monitor(i.sol, i.g_enu, i.sigma_m, i.used, i.constellation, i.used_epoch,
+                              i.truth_m, config.p_fa, config.p_md, int(i.p_const.shape[-1]),
+                              i.frame_ecef)
+
+
+class MhssMonitor(NamedTuple):
+    """MHSS all-in-view PLs, detection and exclusion with the residuals (step 4)."""
+
+    name: str = "mhss"
+    needs_order: bool = True
+
+    def run(self, inputs: ReplayInputs, config: ReplayConfig) -> MonitorReplay:
+        """The MHSS under ``config.budget``, ``fault_modes`` and ``max_order``."""
+        i = inputs
+        return _mhss_monitor(i.sol, i.g_enu, i.used, i.constellation, i.used_epoch, i.truth_m,
+                             i.var_int_m2, i.var_acc_m2, i.p_sat, i.b_nom_m, i.p_const,
+                             config.budget, int(config.max_order), i.frame_ecef,
+                             config.fault_modes)
+
+
+#: name -> monitor, in the order ``replay_metrics`` reports them after mhss and slope
+MONITORS: dict = {}
+
+
+def register_monitor(monitor: Monitor) -> Monitor:
+    """Add ``monitor`` to ``MONITORS`` under ``monitor.name`` (returned, so it can decorate
+    an instance's construction). A name already taken is refused: remove it from ``MONITORS``
+    first to replace it."""
+    name = getattr(monitor, "name", None)
+    if not isinstance(name, str) or not name or not callable(getattr(monitor, "run", None)):
+        raise ValueError("a monitor needs a non-empty str name and a run(inputs, config) "
+                         f"method, got {monitor!r}")
+    if name in MONITORS:
+        raise ValueError(f"a monitor named {name!r} is registered already "
+                         f"({MONITORS[name]!r}); pick another name")
+    if not isinstance(getattr(monitor, "needs_order", None), bool):
+        raise ValueError(f"monitor {name!r} must say needs_order (True or False)")
+    MONITORS[name] = monitor
+    return monitor
+
+
+register_monitor(SlopeMonitor())
+register_monitor(MhssMonitor())
 
 
 def _slope_monitor(sol, g, sigma, used, cons, used_epoch, truth, p_fa, p_md, n_clocks,
@@ -489,7 +604,12 @@ def replay_metrics(result: ReplayResult) -> dict:
         "vpe_median_m": _median(result.vpe_m), "vpe_max_m": _max(result.vpe_m),
         "mhss_max_order": result.max_order,
     }
-    for name, m in (("mhss", result.mhss), ("slope", result.slope)):
+    runs = dict(result.monitors or {})
+    runs.update({k: v for k, v in (("mhss", result.mhss), ("slope", result.slope))
+                 if v is not None})
+    order = ["mhss", "slope"] + [k for k in runs if k not in ("mhss", "slope")]
+    for name in order:
+        m = runs.get(name)
         if m is None:
             continue
         hpl, vpl = np.asarray(m.hpl_m), np.asarray(m.vpl_m)
@@ -510,7 +630,8 @@ def replay_metrics(result: ReplayResult) -> dict:
         out[f"exclusions_{name}"] = int(np.sum(np.any(np.asarray(m.excluded), -1)))
         out[f"exclusion_failures_{name}"] = int(np.sum(np.asarray(m.status)
                                                        == Status.EXCLUSION_FAILED))
-    main = "mhss" if result.mhss is not None else "slope"
+    main = "mhss" if result.mhss is not None else "slope" if result.slope is not None else (
+        next(iter(runs)))
     out["hpl_median_m"] = out[f"hpl_{main}_median_m"]
     out["vpl_median_m"] = out[f"vpl_{main}_median_m"]
     out["misleading_information_epochs"] = out[f"misleading_information_epochs_{main}"]
