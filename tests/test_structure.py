@@ -133,3 +133,58 @@ def test_the_face_rule_finds_every_way_past_a_face(structure, tmp_path):
     ]
     assert "`from oaraim import araim` and `araim.f`" in found[0]
     assert "export each NAME in araim/__init__.py" in found[2]
+
+
+def test_the_widest_public_signature_does_not_grow(rep, structure):
+    """A ratchet until the receiver core takes its inputs and options as objects: no public
+    function or method wider than the widest when the check came (``MAX_PARAMETERS``); the
+    target, ``TARGET_PARAMETERS`` = 8, is reported beside it (docs/design.md)."""
+    assert rep["over_max_parameters"] == [], (
+        "take the inputs or options as one object instead of adding parameters")
+    n, name = rep["widest_signature"]
+    assert n <= structure.MAX_PARAMETERS and name
+    assert rep["signatures_over_target"] >= 0 and structure.TARGET_PARAMETERS == 8
+
+
+def test_no_tracker_references_in_code_and_docs(rep):
+    """Code, tests, docs and results state decisions, not tracker numbers a reader cannot
+    see."""
+    assert rep["tracker_references"] == []
+
+
+def test_signatures_and_tracker_references_are_counted(structure, tmp_path):
+    """On a made-up tree: parameters counted without self (``*args``, ``**kwargs`` one each,
+    a staticmethod's first argument counted), private names and modules left out; a tracker
+    number found in code and docs, a document version ("ICD Issue 2.0") not."""
+    (tmp_path / "pyproject.toml").write_text(textwrap.dedent("""
+        [tool.setuptools.package-dir]
+        "pkg" = "pkg"
+    """))
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "docs").mkdir()
+    tracker = "issue" + " 12"  # written apart so this file holds none
+    (tmp_path / "pkg" / "__init__.py").write_text(textwrap.dedent(f'''
+        def wide(a, b, /, c, *args, d, **kw):
+            """Six (see {tracker})."""
+
+        def _hidden(a, b, c, d, e, f, g, h, i, j):
+            """Private."""
+
+        class K:
+            """A class."""
+
+            def m(self, a, b):
+                """Two."""
+
+            @staticmethod
+            def s(a, b, c):
+                """Three."""
+    '''))
+    (tmp_path / "pkg" / "_private.py").write_text("def wider(a, b, c, d, e, f, g, h, i):\n"
+                                                   "    pass\n")
+    (tmp_path / "docs" / "page.md").write_text(
+        "Galileo OS SIS ICD Issue 2.0 Table 59.\nDecided in (#" + "7).\n")
+    assert structure.signatures(tmp_path) == [(6, "pkg.wide"), (3, "pkg.K.s"), (2, "pkg.K.m")]
+    found = structure.tracker_references(tmp_path)
+    assert [line.split(" -> ")[0] for line in found] == [
+        "docs/page.md:2: '(#" + "7)'", f"pkg/__init__.py:3: '{tracker}'"]
