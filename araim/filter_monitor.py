@@ -79,7 +79,7 @@ class FilterMonitorEpoch(NamedTuple):
     threshold_m: jax.Array
     """(K, 3) T_i,q = K_fa,q sigma_ss,i,q where monitored, else 0."""
     test_ratio: jax.Array
-    """() max over monitored modes and q of |Delta_i,q| / T_i,q (0 without monitored modes)."""
+    """() max over monitored modes and q with T_i,q > 0 of |Delta_i,q| / T_i,q (0 if none)."""
     alert: jax.Array
     """() bool: some monitored separation exceeds its threshold (test_ratio > 1)."""
     prior: jax.Array
@@ -161,8 +161,12 @@ def separation_monitor(x_pos, p_pos, fm, budget: IntegrityBudget,
     ok = status == Status.OK
     pl_ok = jnp.where(ok, pl[:2], 0.0)
     hpl = jnp.where(ok, jnp.sqrt(pl_ok[0] ** 2 + pl_ok[1] ** 2), jnp.inf)
-    ratio = jnp.where(threshold > 0.0, jnp.abs(sep) / jnp.where(threshold > 0.0, threshold, 1.0),
-                      jnp.where(monitored[:, None] & (jnp.abs(sep) > 0.0), jnp.inf, 0.0))
+    # a zero threshold (sigma_ss = 0: the mode's separation has no variance, as for a source
+    # no other source can check) tests nothing: tau = 0 as in the snapshot; the PL equation gives
+    # such a mode no detection credit (its term is P_f Q(PL / sigma_i)). In an EKF bank the
+    # separation there is linearisation noise, not a fault signature
+    ratio = jnp.where(threshold > 0.0,
+                      jnp.abs(sep) / jnp.where(threshold > 0.0, threshold, 1.0), 0.0)
     test = jnp.max(ratio)
     return FilterMonitorEpoch(
         hpl_m=hpl, vpl_m=pl[2], emt_m=emt, pl_enu_m=pl, position_m=x_pos[0], separation_m=sep,

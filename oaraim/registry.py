@@ -26,6 +26,7 @@ STUDY_CLASSES = {
     "integrity-risk": "integrity_risk:IntegrityRisk",
     "tower-placement": "tower_placement:TowerPlacement",
     "sop-requirements": "sop_requirements:SopRequirements",
+    "filter-integrity": "filter_integrity:FilterIntegrity",
 }
 
 

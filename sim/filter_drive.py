@@ -66,8 +66,9 @@ class FilterDriveSummary(NamedTuple):
     """(3,) at-risk epochs with HPE > HPL."""
     n_misleading: jax.Array
     """(3,) at-risk epochs with HPE > HPL and no alert (hazardously misleading)."""
-    n_alert_before: jax.Array
-    """(3,) alerts before the onset (false alerts)."""
+    n_false_alerts: jax.Array
+    """(3,) alerts at epochs without a fault (before the onset; every epoch of a fault-free
+    run)."""
     detection_delay_s: jax.Array
     """(3,) first alert at or after the onset minus the onset, s (inf: never)."""
     n_available: jax.Array
@@ -93,6 +94,10 @@ class FilterDriveTrace(NamedTuple):
     """(E,) the injected bias on the faulty tower."""
     status: jax.Array
     """(E,) the filter monitor's Status."""
+    test_ratio: jax.Array
+    """(E,) the filter monitor's largest |separation| / threshold."""
+    worst_mode: jax.Array
+    """(E,) the bank filter (1..K-1) of that largest ratio (0: none monitored)."""
 
 
 def gm_overbound_variance(sigma_m, tau_s, dt_s):
@@ -158,26 +163,30 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
                          jnp.linalg.norm(pos_snap[:2] - pos_e[:2])])
         hpl = jnp.stack([ss.hpl_m, ro.hpl_m, sn.pl.hpl_m])
         alert = jnp.stack([ss.alert, ro.detected, sn.detected])
-        return (world, bank, xi), (hpe, hpl, alert, bias[jnp.clip(fault.source, 0)], ss.status)
+        thr = ss.threshold_m
+        ratio = jnp.max(jnp.where(thr > 0, jnp.abs(ss.separation_m) / jnp.where(thr > 0, thr, 1.0),
+                                  0.0), axis=1)
+        return (world, bank, xi), (hpe, hpl, alert, bias[jnp.clip(fault.source, 0)], ss.status,
+                                   ss.test_ratio, jnp.argmax(ratio))
 
     n_ep = setup.t_s.shape[0]
     xs = (jnp.arange(n_ep), setup.gyro, setup.accel, setup.t_s, setup.pos[1:n_ep + 1],
           setup.tower_clk_m)
-    _, (hpe, hpl, alert, fb, st) = jax.lax.scan(body, (d.world, bank0, xi0), xs)
+    _, (hpe, hpl, alert, fb, st, tr, wm) = jax.lax.scan(body, (d.world, bank0, xi0), xs)
     t = setup.t_s[:, None]
     risk = t >= jnp.where(fault.source >= 0, fault.onset_s, -jnp.inf)
-    before = ~risk
+    faulted = risk & (fault.source >= 0)
     exceed = hpe > hpl
     fin = jnp.isfinite(hpl)
     first = jnp.min(jnp.where(alert & risk, t, jnp.inf), 0)
     summary = FilterDriveSummary(
         n_epochs=jnp.asarray(n_ep), n_at_risk=jnp.sum(risk[:, 0]),
         n_exceed=jnp.sum(exceed & risk, 0), n_misleading=jnp.sum(exceed & ~alert & risk, 0),
-        n_alert_before=jnp.sum(alert & before, 0),
+        n_false_alerts=jnp.sum(alert & ~faulted, 0),
         detection_delay_s=jnp.where(fault.source >= 0, first - fault.onset_s, jnp.inf),
         n_available=jnp.sum((hpl <= cfg.hal_m) & risk, 0),
         hpl_sum_m=jnp.sum(jnp.where(fin & risk, hpl, 0.0), 0), n_finite=jnp.sum(fin & risk, 0),
         hpe_max_m=jnp.max(jnp.where(risk, hpe, 0.0), 0))
     if traces:
-        return summary, FilterDriveTrace(setup.t_s, hpe, hpl, alert, fb, st)
+        return summary, FilterDriveTrace(setup.t_s, hpe, hpl, alert, fb, st, tr, wm)
     return summary

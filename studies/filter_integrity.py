@@ -1,0 +1,390 @@
+"""Does a filter's protection level bound the risk? The solution-separation filter bank against
+seed 000's Xi-slope HPL and the snapshot MHSS on the same simulated drives
+(docs/filter-integrity.md).
+
+One realization is one run of the seed 000 drive (``sim.drive_seed000``, 5 towers of one
+operator, LTE + IMU EKF; ``sim.simulate_filter_drive``) under one fault scenario:
+
+- ``fault-free``;
+- ``step``: a bias on one tower, the tower uniform over the five, the onset uniform in
+  [0.1, 0.6] of the run, the size log-uniform in ``step_m`` (m);
+- ``ramp``: a bias growing at a slope log-uniform in ``ramp_m_s`` (m/s), same tower and onset
+  draws (a tower clock or a multipath bias drifting away: the case an innovation test misses).
+
+Each run carries three monitors on the same measurements: the filter bank (main EKF + one
+sub-filter per order-1 mode of ``fault_modes``: 5 towers and the operator), seed 000's EKF
+with NIS detection and the Xi-slope HPL (the same estimate as the bank's main filter; no
+exclusion), and the snapshot MHSS of each epoch's pseudoranges (its own estimate). An epoch is
+*at risk* from the onset on (every epoch of a fault-free run); it is hazardously misleading
+(HMI) for a monitor when HPE > HPL and the monitor raised no alert.
+
+**What is compared with the budget.** The PL equation (seed 004 eq. 14) spends at most PHMI_H
+on the sum over modes of P_f,i P(HMI | mode i), so a single-tower fault, whatever its size and
+onset, may give P(HMI | fault) <= PHMI_H / P_s (here 9.9e-8 / 1e-5 ~ 1e-2 per epoch); the
+fault-free epochs may give at most PHMI_H ~ 1e-7, which a Monte Carlo of this size cannot
+resolve (reported as its upper confidence bound, 'not resolved'). The rate is per at-risk
+epoch with a Clopper-Pearson 95 % interval; epochs of one run are correlated, so the runs with
+at least one HMI epoch are reported too (the per-run share, an independent count). A check
+fails where the interval's lower end lies above the allocation. ``sigma_scale`` < 1 makes
+every filter believe its pseudoranges better than they are: the check must then fail (the
+committed quick run and tests/test_filter_integrity.py show it does).
+
+Choices (the seeds give none): P_s = 1e-5 per tower and epoch, P_const = 1e-8 for the operator
+(below P_THRES: the operator mode is left in P_NM, as a common operator bias goes into the
+receiver clock), seed 004 Table I budget, HAL 30 m (seed 001), the clean world by default
+(white noise, the filter told the truth: the filter bank's P_sub - P_main holds); ``world=
+realistic`` adds the Gauss-Markov multipath and tower clocks of ``sim.ErrorModel`` and
+``gm_overbound=yes`` inflates the filters' variance by the GM long-run overbound.
+Not done: importance sampling over fault size and onset for the small probabilities (the
+fault-free ~1e-7 is not resolved), the seed 004 UAV geometry, exclusion.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+
+from oaraim import araim, mc, sim
+from oaraim.studies.base import (
+    Param,
+    Study,
+    StudyResult,
+    in_range,
+    parse_choice,
+    positive,
+    probability,
+)
+
+#: runs per call of the vmapped kernel: one compiled shape whatever the realization count
+MC_BATCH = 16
+SCENARIOS = ("fault-free", "step", "ramp")
+MONITORS = sim.filter_drive.MONITORS
+MONITOR_LABELS = {"filter_ss": "filter solution separation", "ekf_xi_slope": "EKF NIS + Xi-slope",
+                  "snapshot_mhss": "snapshot MHSS"}
+#: the onset window, as fractions of the run's duration
+ONSET_WINDOW = (0.1, 0.6)
+#: cells of the fault draws (mc.realization_keys): one per scenario, apart from the runs'
+FAULT_CELL = 100
+
+
+def _range(name, v):
+    """'lo,hi' with 0 < lo <= hi."""
+    try:
+        lo, hi = (float(x) for x in str(v).split(","))
+    except ValueError:
+        raise ValueError(f"{name} must be 'lo,hi' (two numbers), got {v!r}") from None
+    if not 0 < lo <= hi:
+        raise ValueError(f"{name} must satisfy 0 < lo <= hi, got {v!r}")
+    return f"{lo:g},{hi:g}"
+
+
+def _pair(text):
+    return tuple(float(x) for x in text.split(","))
+
+
+@functools.cache
+def _kernel(cfg):
+    """The jitted vmapped drive of one config (static)."""
+    def f(keys, faults, setup, err, sigma_f):
+        return jax.vmap(lambda k, fl: sim.simulate_filter_drive(
+            k, setup, err, fl, cfg, filter_sigma_pr_m=sigma_f))(keys, faults)
+    return jax.jit(f)
+
+
+@functools.cache
+def _trace_kernel(cfg):
+    def f(key, fault, setup, err, sigma_f):
+        return sim.simulate_filter_drive(key, setup, err, fault, cfg, filter_sigma_pr_m=sigma_f,
+                                         traces=True)[1]
+    return jax.jit(f)
+
+
+class FilterIntegrity(Study):
+    """The ``filter-integrity`` study (module docstring)."""
+
+    name = "filter-integrity"
+    title = ("Measured integrity risk of a filter's PLs: solution-separation filter bank vs "
+             "Xi-slope HPL vs snapshot MHSS, seed 000 drive, steps and ramps")
+    seed_file = "000_da291ac15380f45f.txt"
+    realization = "one run of the seed 000 drive per fault scenario (fault-free, step, ramp)"
+    default_realizations = 160
+    quick_realizations = 16
+    quick_sets = {"duration_s": 60.0}
+    quick_cost_s = 60
+    max_realizations = 100_000
+    params = {
+        "duration_s": Param(0.0, in_range(0.0, 1e4),
+                            "truncate the drive to this many seconds (0: whole drive, 145 s)",
+                            "s"),
+        "world": Param("clean", parse_choice("clean", "realistic"),
+                       "error world: clean (white noise, filter told the truth) or realistic "
+                       "(sim.ErrorModel: GM multipath, tower clocks, calibration; no NLOS)"),
+        "gm_overbound": Param("no", parse_choice("no", "yes"),
+                              "inflate the filters' variance by the GM multipath long-run "
+                              "overbound (sim.filter_drive.gm_overbound_variance)"),
+        "sigma_pr_m": Param(2.0, positive, "white pseudorange noise of the truth", "m"),
+        "sigma_scale": Param(1.0, in_range(1e-3, 100.0),
+                             "the filters' pseudorange sigma = this x the truth's (< 1: an "
+                             "injected model error, the check must fail)"),
+        "step_m": Param("3,60", _range, "step size range, log-uniform", "m"),
+        "ramp_m_s": Param("0.02,2", _range, "ramp slope range, log-uniform", "m/s"),
+        "p_s": Param(1e-5, probability, "P_s per tower and epoch"),
+        "p_const": Param(1e-8, probability, "P_const of the operator"),
+        "fault_modes": Param("add-v4.2", parse_choice(*araim.FAULT_MODE_CONVENTIONS),
+                             "fault-mode convention of the bank and the snapshot"),
+        "hal_m": Param(30.0, positive, "horizontal alert limit (seed 001)", "m"),
+    }
+
+    def run(self, params, realizations, seed, progress):
+        """Every scenario's runs through ``sim.simulate_filter_drive``, then the rates."""
+        p = params
+        budget = araim.BUDGET_SEED004_TABLE_I
+        cfg = sim.FilterDriveConfig(budget=budget, p_sat=p["p_s"], p_const=p["p_const"],
+                                    fault_modes=p["fault_modes"], max_order=1,
+                                    hal_m=p["hal_m"],
+                                    gm_inflation=1.0 if p["gm_overbound"] == "yes" else 0.0)
+        setup = sim.drive_setup(sim.drive_seed000(),
+                                duration_s=p["duration_s"] if p["duration_s"] > 0 else None)
+        t_end = float(setup.t_s[-1])
+        if p["world"] == "clean":
+            err = sim.ErrorModel.clean(sigma_pr_m=p["sigma_pr_m"], fault_onset_s=np.inf,
+                                       fault_bias_m=0.0)
+        else:
+            err = sim.ErrorModel(sigma_pr_m=p["sigma_pr_m"], nlos_rate_per_s=0.0,
+                                 fault_onset_s=np.inf, fault_bias_m=0.0)
+        sigma_f = p["sigma_scale"] * p["sigma_pr_m"] if (
+            p["world"] == "clean" or p["sigma_scale"] != 1.0) else 0.0
+        n_t = int(setup.towers.shape[0])
+        onset = (ONSET_WINDOW[0] * t_end, ONSET_WINDOW[1] * t_end)
+        fn = _kernel(cfg)
+        fields = sim.FilterDriveSummary._fields
+        out = {s: {k: [] for k in fields} for s in SCENARIOS}
+        drawn = {s: [] for s in SCENARIOS}
+        traces = {}
+        for si, scen in enumerate(SCENARIOS):
+            for start in range(0, realizations, MC_BATCH):
+                m = min(MC_BATCH, realizations - start)
+                keys = mc.realization_keys(seed, si, start, MC_BATCH)
+                faults = self._faults(scen, seed, si, start, n_t, onset, p)
+                s = fn(keys, faults, setup, err, sigma_f)
+                for k in fields:
+                    out[scen][k].append(np.asarray(getattr(s, k))[:m])
+                drawn[scen].append(np.stack([np.asarray(x, float)[:m] for x in faults], -1))
+                if progress is not None:
+                    progress.advance(m)
+            fl0 = jax.tree.map(lambda x: x[0], self._faults(scen, seed, si, 0, n_t, onset, p))
+            traces[scen] = _trace_kernel(cfg)(mc.realization_keys(seed, si, 0, 1)[0], fl0,
+                                              setup, err, sigma_f)
+        res = {s: {k: np.concatenate(v) for k, v in out[s].items()} for s in SCENARIOS}
+        faults = {s: np.concatenate(drawn[s]) for s in SCENARIOS}
+        ds = self._dataset(res, faults, traces, realizations, p, budget)
+        rows, metrics = self._summary(res, faults, p, budget, realizations, t_end)
+        ds.attrs["check_passed"] = int(metrics["integrity_check"]["passed"])
+        return StudyResult(ds, rows, metrics)
+
+    @staticmethod
+    def _faults(scen, seed, si, start, n_t, onset, p):
+        """MC_BATCH fault scenarios of runs start.., one key per run (cell FAULT_CELL + si)."""
+        if scen == "fault-free":
+            nf = sim.no_fault()
+            return jax.tree.map(lambda x: jnp.broadcast_to(x, (MC_BATCH,)), nf)
+        keys = mc.realization_keys(seed, FAULT_CELL + si, start, MC_BATCH)
+        size = _pair(p["step_m"] if scen == "step" else p["ramp_m_s"])
+        draw = jax.vmap(lambda k: jax.tree.map(lambda x: x[0], sim.draw_faults(
+            k, 1, n_t, scen, onset, size)))
+        return draw(keys)
+
+    @staticmethod
+    def _dataset(res, faults, traces, n, p, budget):
+        v = {}
+        for k in res[SCENARIOS[0]]:
+            arr = np.stack([res[s][k] for s in SCENARIOS])
+            v[k] = (("scenario", "run", "monitor") if arr.ndim == 3 else ("scenario", "run"), arr)
+        v["fault"] = (("scenario", "run", "fault_field"),
+                      np.stack([faults[s] for s in SCENARIOS]))
+        for k in ("hpe_m", "hpl_m", "alert"):
+            v[f"trace_{k}"] = (("scenario", "epoch", "monitor"),
+                               np.stack([np.asarray(getattr(traces[s], k)) for s in SCENARIOS]))
+        v["trace_fault_m"] = (("scenario", "epoch"),
+                              np.stack([np.asarray(traces[s].fault_m) for s in SCENARIOS]))
+        v["trace_t_s"] = ("epoch", np.asarray(traces[SCENARIOS[0]].t_s))
+        return xr.Dataset(v, coords={"scenario": list(SCENARIOS), "run": np.arange(n),
+                                     "monitor": list(MONITORS),
+                                     "fault_field": list(sim.FaultScenario._fields)},
+                          attrs={"phmi_h": budget.phmi_h, "p_s": p["p_s"], "hal_m": p["hal_m"],
+                                 "realizations": n, "world": p["world"],
+                                 "sigma_scale": p["sigma_scale"]})
+
+    @staticmethod
+    def _summary(res, faults, p, budget, n, t_end):
+        rows, per = [], {}
+        passed = True
+        for scen in SCENARIOS:
+            r = res[scen]
+            allocation = budget.phmi_h if scen == "fault-free" else budget.phmi_h / p["p_s"]
+            per[scen] = {}
+            for mi, mon in enumerate(MONITORS):
+                k, nn = int(r["n_misleading"][:, mi].sum()), int(r["n_at_risk"].sum())
+                rate = mc.rate_with_interval(k, nn)
+                runs_hmi = mc.rate_with_interval(int(np.sum(r["n_misleading"][:, mi] > 0)), n)
+                exceed = mc.rate_with_interval(int(r["n_exceed"][:, mi].sum()), nn)
+                resolved = rate["ci_high"] < 1.0 and (rate["ci_high"] <= allocation
+                                                     or rate["ci_low"] > allocation)
+                fails = rate["ci_low"] > allocation
+                if mon == "filter_ss":
+                    passed = passed and not fails
+                fin = np.maximum(r["n_finite"][:, mi].sum(), 1)
+                delay = r["detection_delay_s"][:, mi]
+                per[scen][mon] = {
+                    "hmi_per_epoch": rate, "runs_with_hmi": runs_hmi, "hpe_gt_hpl": exceed,
+                    "allocation": allocation,
+                    "verdict": "exceeds the allocation" if fails else (
+                        "within the allocation" if resolved else "not resolved (bound above "
+                        "the allocation)"),
+                    "mean_hpl_m": float(r["hpl_sum_m"][:, mi].sum() / fin),
+                    "availability_pct": 100.0 * float(r["n_available"][:, mi].sum()) / max(nn, 1),
+                    "false_alerts": int(r["n_false_alerts"][:, mi].sum()),
+                    "epochs_without_fault": int(r["n_epochs"].sum()) - (
+                        int(r["n_at_risk"].sum()) if scen != "fault-free" else 0),
+                    "detected_runs_pct": (100.0 * float(np.mean(np.isfinite(delay)))
+                                          if scen != "fault-free" else None),
+                    "median_detection_delay_s": (float(np.median(delay)) if scen != "fault-free"
+                                                 else None),
+                    "max_hpe_m": float(r["hpe_max_m"][:, mi].max()),
+                }
+                d = per[scen][mon]
+                rows.append({
+                    "quantity": f"P(HMI) per at-risk epoch, {scen}, {MONITOR_LABELS[mon]}",
+                    "unit": "-", "published": None, "reproduced": rate["rate"],
+                    "note": (f"{k} of {nn} epochs, 95 % CI [{rate['ci_low']:.2g}, "
+                             f"{rate['ci_high']:.2g}], allocation {allocation:.2g}: "
+                             f"{d['verdict']}; runs with HMI {runs_hmi['count']} of {n}; "
+                             f"mean HPL {d['mean_hpl_m']:.3g} m, available at HAL "
+                             f"{d['availability_pct']:.3g} %; alerts without a fault "
+                             f"{d['false_alerts']} of {d['epochs_without_fault']} epochs")})
+            if scen == "ramp":
+                for mon in MONITORS:
+                    d = per[scen][mon]
+                    rows.append({"quantity": f"ramp detection delay (median), "
+                                             f"{MONITOR_LABELS[mon]}", "unit": "s",
+                                 "published": None,
+                                 "reproduced": d["median_detection_delay_s"],
+                                 "note": f"detected in {d['detected_runs_pct']:.3g} % of runs; "
+                                         "the median over all runs, an undetected run counting "
+                                         "as inf"})
+        rows.append({"quantity": "integrity check: the filter bank's P(HMI) not above the "
+                                 "allocation in any scenario", "unit": "pass", "published": None,
+                     "reproduced": float(passed),
+                     "note": "1 pass, 0 fail; sigma_scale < 1 (an injected model error) must "
+                             "fail it"})
+        metrics = {"scenarios": per, "integrity_check": {"passed": bool(passed)},
+                   "runs_per_scenario": n, "drive_s": t_end, "world": p["world"],
+                   "sigma_scale": p["sigma_scale"], "gm_overbound": p["gm_overbound"],
+                   "budget": {"phmi_h": budget.phmi_h, "p_fa_h": budget.p_fa_h,
+                              "p_thresh": budget.p_thresh},
+                   "fault_sizes": {s: {"median": float(np.median(
+                       faults[s][:, 2] + faults[s][:, 3]))} for s in ("step", "ramp")}}
+        return rows, metrics
+
+    def plot(self, out_dir):
+        """risk.png (measured P(HMI) with CIs vs the allocation), pl.png (HPL distributions)
+        and ramp_run.png (one ramp run's HPE, HPLs and alerts)."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from oaraim.mc import clopper_pearson
+
+        ds = xr.open_zarr(f"{out_dir}/data.zarr", consolidated=False)
+        phmi, p_s, hal = ds.attrs["phmi_h"], ds.attrs["p_s"], ds.attrs["hal_m"]
+        files = []
+        fig, ax = plt.subplots(figsize=(8.0, 4.2))
+        floor = 1e-8
+        for mi, mon in enumerate(MONITORS):
+            for si in range(len(SCENARIOS)):
+                k = int(ds["n_misleading"].values[si, :, mi].sum())
+                n = int(ds["n_at_risk"].values[si].sum())
+                lo, hi = clopper_pearson(k, n)
+                x = si + (mi - 1) * 0.22
+                rate = k / max(n, 1)
+                ax.plot([x, x], [max(lo, floor), hi], color=f"C{mi}", lw=2)
+                ax.plot(x, max(rate, floor), "o" if k else "v", color=f"C{mi}",
+                        label=MONITOR_LABELS[mon] if si == 0 else None)
+        for si, scen in enumerate(SCENARIOS):
+            alloc = phmi if scen == "fault-free" else phmi / p_s
+            ax.plot([si - 0.4, si + 0.4], [alloc, alloc], "k--", lw=1,
+                    label="allocation (PHMI_H; PHMI_H / P_s under a fault)" if si == 0 else None)
+        ax.set_yscale("log")
+        ax.set_ylim(floor * 0.5, 1.5)
+        ax.set_xticks(range(len(SCENARIOS)), SCENARIOS)
+        ax.set_ylabel("P(HPE > HPL, no alert) per at-risk epoch")
+        ax.set_title(f"Measured integrity risk, {ds.attrs['realizations']} runs per scenario "
+                     f"(95 % CI; a triangle at {floor:g}: none seen)", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="upper left")
+        fig.tight_layout()
+        files.append(f"{out_dir}/risk.png")
+        fig.savefig(files[-1], dpi=120)
+        plt.close(fig)
+
+        fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.8))
+        hpl = ds["trace_hpl_m"].values  # (scenario, epoch, monitor)
+        for mi, mon in enumerate(MONITORS):
+            h = hpl[0, :, mi]
+            fin = np.sort(h[np.isfinite(h)])
+            if fin.size:
+                axes[0].plot(fin, np.arange(1, fin.size + 1) / h.size, color=f"C{mi}",
+                             label=MONITOR_LABELS[mon])
+        axes[0].axvline(hal, color="k", ls=":", label=f"HAL {hal:g} m")
+        axes[0].set_xscale("log")
+        axes[0].set_xlim(0.5, 2e3)
+        axes[0].set_ylim(0, 1)
+        axes[0].set_xlabel("HPL (m), fault-free run 0")
+        axes[0].set_ylabel("share of epochs (inf never reached)")
+        axes[0].legend(fontsize=7)
+        axes[0].grid(alpha=0.3)
+        mean = ds["hpl_sum_m"].values.sum(1) / np.maximum(ds["n_finite"].values.sum(1), 1)
+        for mi, mon in enumerate(MONITORS):
+            axes[1].bar(np.arange(len(SCENARIOS)) + (mi - 1) * 0.27, mean[:, mi], 0.25,
+                        color=f"C{mi}", label=MONITOR_LABELS[mon])
+        axes[1].set_yscale("log")
+        axes[1].set_ylim(0.5, 2e3)
+        axes[1].set_xticks(range(len(SCENARIOS)), SCENARIOS)
+        axes[1].set_ylabel("mean HPL over at-risk epochs (m)")
+        axes[1].grid(alpha=0.3, axis="y")
+        fig.tight_layout()
+        files.append(f"{out_dir}/pl.png")
+        fig.savefig(files[-1], dpi=120)
+        plt.close(fig)
+
+        t = ds["trace_t_s"].values
+        si = SCENARIOS.index("ramp")
+        fig, ax = plt.subplots(figsize=(8.0, 4.0))
+        for mi, mon in enumerate(MONITORS):
+            ax.plot(t, ds["trace_hpl_m"].values[si, :, mi], color=f"C{mi}",
+                    label=f"HPL, {MONITOR_LABELS[mon]}")
+            ax.plot(t, ds["trace_hpe_m"].values[si, :, mi], color=f"C{mi}", ls=":", lw=1,
+                    label=f"HPE, {MONITOR_LABELS[mon]}")
+            al = ds["trace_alert"].values[si, :, mi]
+            if al.any():
+                ax.plot(t[al], np.full(al.sum(), 0.6 * (1.4 ** mi)), "|", color=f"C{mi}",
+                        ms=6)
+        ax.plot(t, np.maximum(ds["trace_fault_m"].values[si], 1e-3), "k-", lw=0.8,
+                label="injected ramp (m)")
+        f = ds["fault"].values[si, 0]
+        ax.set_yscale("log")
+        ax.set_ylim(0.3, 3e3)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("m (ticks near the bottom: alerts)")
+        ax.set_title(f"Ramp run 0: tower {int(f[0]) + 1}, onset {f[1]:.1f} s, "
+                     f"{f[3]:.3g} m/s", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=6, ncol=2, loc="upper left")
+        fig.tight_layout()
+        files.append(f"{out_dir}/ramp_run.png")
+        fig.savefig(files[-1], dpi=120)
+        plt.close(fig)
+        return files
