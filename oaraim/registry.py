@@ -18,6 +18,7 @@ STUDY_CLASSES = {
     "seed004-fig4-hpl-maps": "seed004_fig4:Fig4HplMaps",
     "seed004-theorems": "seed004_theorems:Theorems",
     "rinex-replay": "rinex_replay:RinexReplay",
+    "rinex-compare": "rinex_compare:RinexCompare",
     "seed000-ekf-raim": "seed000_ekf_raim:Seed000EkfRaim",
     "seed002-outlier": "seed002_outlier:Seed002Outlier",
     "seed001-vehicle": "seed001_vehicle:Seed001Vehicle",
