@@ -114,6 +114,9 @@ class FilterIntegrity(Study):
     quick_sets = {"duration_s": 60.0}
     quick_cost_s = 60
     max_realizations = 100_000
+    #: the generic tests of tests/test_studies.py cap realizations at this (a realization is a
+    #: whole drive through a bank of 7 EKFs)
+    test_realizations = 16
     params = {
         "duration_s": Param(0.0, in_range(0.0, 1e4),
                             "truncate the drive to this many seconds (0: whole drive, 145 s)",

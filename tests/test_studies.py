@@ -134,7 +134,10 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
          # one (n_sops, order) program: 2 SOPs at P_s^S 1e-4 (order 1), a 1 x 1 map
          "sop-requirements": {"n_sops": "2", "p_s_sop": "1e-4", "check_p_s": "1e-4",
                               "map_n_sops": "2", "map_sigma_ura_sop_m": "5",
-                              "map_p_s_sop": "1e-4"}}
+                              "map_p_s_sop": "1e-4"},
+         # a realization is a drive through a bank of 7 EKFs: 20 s of it (the sizes
+         # tests/test_filter_integrity.py compiles)
+         "filter-integrity": {"duration_s": "20"}}
 
 
 def _n(study, n, params=None):
