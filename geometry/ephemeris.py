@@ -610,12 +610,38 @@ def _propagate(params, toe_healthy, toe_unhealthy, sat_ok, t, max_age_s):
             jnp.where(v, tt - g["toe_s"], 0.0))
 
 
+@functools.lru_cache(maxsize=16)
+def navigation_systems(path_str, mtime_ns, size):
+    """The system letters whose records a navigation file holds (its structural check),
+    cached per (resolved path, mtime, size)."""
+    text = _navigation_text(Path(path_str))
+    return tuple(_check_navigation_text(Path(path_str), text)["systems"])
+
+
+def _merged(tables):
+    """Record tables of several files as one; a record in more than one file (same satellite,
+    t_oc, t_oe and data source) kept once, the first file's."""
+    keys = tables[0].keys()
+    t = {k: np.concatenate([tb[k] for tb in tables]) for k in keys}
+    src = np.nan_to_num(np.asarray(t["DataSrc"], np.float64)) if "DataSrc" in t else 0.0
+    ident = np.rec.fromarrays([t["sv"].astype(str), np.round(t["toc_s"], 3),
+                               np.round(t["toe_s"], 3),
+                               np.broadcast_to(src, t["toc_s"].shape)])
+    _, first = np.unique(ident, return_index=True)
+    keep = np.sort(first)
+    return {k: v[keep] for k, v in t.items()}
+
+
 def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S,
                     galileo_source=None) -> Ephemeris:
-    """Broadcast ephemerides of a RINEX 2 (GPS) or RINEX 3 navigation file (plain or .gz).
+    """Broadcast ephemerides of a RINEX 2 (GPS) or RINEX 3 navigation file (plain or .gz), or
+    of several files read as one (a station's separate GPS ``GN`` and Galileo ``EN`` files, or
+    consecutive days): their records merged, a record present in more than one file (same
+    satellite, t_oc, t_oe and data source) kept once.
 
     Args:
-      path: the file.
+      path: the file, or a sequence of files (each keeps the systems of ``systems`` it has;
+        a file with none of them is passed over, and none at all is an error).
       systems: RINEX system letters to keep ('G' GPS, 'E' Galileo).
       max_age_s: largest |t - t_oe| of a usable record (default 4 h).
       galileo_source: None (every Galileo record, I/NAV and F/NAV alike), 'fnav' (only F/NAV
@@ -626,17 +652,37 @@ def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S,
       NavigationFileError: (a ValueError) naming the file and line when the file is missing,
         malformed or truncated.
     """
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "
-                                  "RINEX 2/3 navigation file (plain or .gz)")
+    paths = ([path] if isinstance(path, (str, os.PathLike)) else list(path))
+    if not paths:
+        raise NavigationFileError("no navigation file given; give a RINEX 2/3 navigation file "
+                                  "(plain or .gz) or several")
     bad = [s for s in systems if s not in SYSTEM_CODES]
     if bad:
         raise ValueError(f"systems must be among 'G' (GPS) and 'E' (Galileo), got {bad}")
     if galileo_source is not None and galileo_source not in GALILEO_SOURCES:
         raise ValueError(f"galileo_source must be None, 'inav' or 'fnav', got {galileo_source!r}")
-    st = os.stat(p)
-    table = _parsed_records(str(p.resolve()), st.st_mtime_ns, st.st_size, tuple(systems))
+    tables = []
+    for one in paths:
+        p = Path(one).expanduser()
+        if not p.is_file():
+            raise NavigationFileError(f"navigation file {str(one)!r} not found; give an "
+                                      "existing RINEX 2/3 navigation file (plain or .gz)")
+        st = os.stat(p)
+        use = systems
+        if len(paths) > 1:  # each file keeps the systems it has
+            info = navigation_systems(str(p.resolve()), st.st_mtime_ns, st.st_size)
+            use = tuple(x for x in systems if x in info)
+            if not use:
+                continue
+        tables.append(_parsed_records(str(p.resolve()), st.st_mtime_ns, st.st_size,
+                                      tuple(use)))
+    if not tables:
+        raise NavigationFileError(f"{', '.join(str(x) for x in paths)}: no "
+                                  f"{'/'.join(systems)} records in any of the files; add the "
+                                  "navigation file of those systems")
+    table = tables[0] if len(tables) == 1 else _merged(tables)
+    p = Path(paths[0]).expanduser() if len(paths) == 1 else Path(
+        " + ".join(Path(x).name for x in paths))
     if galileo_source is not None:
         gal = np.char.startswith(table["sv"].astype(str), "E")
         src = table["DataSrc"].astype(np.int64) & GALILEO_SOURCES[galileo_source]

@@ -32,7 +32,11 @@ import numpy as np
 
 from oaraim.constants import C_M_S
 from oaraim.geometry import atmosphere, gpstime
-from oaraim.geometry.ephemeris import NavigationFileError, georinex_navigation
+from oaraim.geometry.ephemeris import (
+    NavigationFileError,
+    georinex_navigation,
+    navigation_systems,
+)
 from oaraim.geometry.frames import (
     az_el_from_rotation,
     earth_rotation_correction,
@@ -73,12 +77,32 @@ def _nav_extras(path_str, mtime_ns, size):
 
 
 def navigation_extras(path) -> NavigationExtras:
-    """Klobuchar coefficients (header) and per-record T_GD of a GPS navigation file.
+    """Klobuchar coefficients (header) and per-record T_GD of a GPS navigation file, or of
+    several (``path`` a sequence: the first file's coefficients that has them, every GPS
+    file's T_GD; files without GPS records are passed over).
 
     The Klobuchar coefficients are ``None`` when the header lacks ``ION ALPHA`` / ``ION BETA``
     (RINEX 2) or ``IONOSPHERIC CORR GPSA / GPSB`` (RINEX 3), or holds only zeros; the caller
     then decides (the replay applies no ionospheric correction and says so).
     """
+    if not isinstance(path, (str, os.PathLike)):  # several files: those with GPS records
+        parts = []
+        for one in path:
+            p = Path(one).expanduser()
+            if not p.is_file():
+                raise NavigationFileError(f"navigation file {str(one)!r} not found; give an "
+                                          "existing RINEX 2/3 navigation file (plain or .gz)")
+            st = os.stat(p)
+            if "G" in navigation_systems(str(p.resolve()), st.st_mtime_ns, st.st_size):
+                parts.append(navigation_extras(p))
+        if not parts:
+            raise NavigationFileError("none of the navigation files holds GPS records; add "
+                                      "the GPS (GN or mixed MN) file")
+        with_ion = [x for x in parts if x.alpha is not None]
+        ion = with_ion[0] if with_ion else parts[0]
+        return NavigationExtras(ion.alpha, ion.beta,
+                                *(np.concatenate([getattr(x, k) for x in parts])
+                                  for k in ("tgd_sv", "tgd_time_s", "tgd_s")))
     p = Path(path).expanduser()
     if not p.is_file():
         raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "

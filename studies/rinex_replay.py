@@ -44,6 +44,7 @@ Choices (none of them tuned on the results):
 """
 
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -97,6 +98,30 @@ STANFORD_AXES = (("horizontal", "hpe", "hpl", "hal_m"), ("vertical", "vpe", "vpl
 
 #: 'auto' (the shared data file) or an existing file
 parse_path = keyword_or_file(("auto",), "RINEX file")
+
+
+def parse_paths(name, v):
+    """'auto', or one or more existing files joined by ',' (hourly observation files of one
+    receiver; a station's separate GN and EN navigation files) -> 'auto' or the resolved
+    paths joined by ','."""
+    parts = [x.strip() for x in (v if isinstance(v, (list, tuple)) else str(v).split(","))]
+    parts = [x for x in parts if x]
+    if parts == ["auto"] or not parts:
+        return parse_path(name, "auto")
+    return ",".join(parse_path(name, x) for x in parts)
+
+
+def as_paths(v):
+    """The path, or the list of paths, of a ``parse_paths`` value (one file: a string)."""
+    parts = str(v).split(",")
+    return parts[0] if len(parts) == 1 else parts
+
+
+def file_names(v):
+    """The files' names for titles and summaries ('a + b' for several); ``v`` a path, a list
+    of paths or paths joined by ','."""
+    parts = [v] if isinstance(v, (str, Path)) else list(v)
+    return " + ".join(Path(y.strip()).name for x in parts for y in str(x).split(","))
 
 
 def parse_truth(name, v):
@@ -191,8 +216,10 @@ def data_files(obs, nav):
 
 
 def resolve_files(obs, nav):
-    """(obs path, nav path) from the parameters; 'auto' files come from ``oaraim.data`` (the
-    data folder, else fetched into the cache); one line with the fix when one is missing."""
+    """(obs, nav) from the parameters (each a path, or a list of paths where several were
+    given); 'auto' files come from ``oaraim.data`` (the data folder, else fetched into the
+    cache); 'auto' navigation beside a given observation file: ``navigation_beside``; one
+    line with the fix when one is missing."""
     hint = "pass --set obs=PATH --set nav=PATH (RINEX observation and navigation files)"
     if obs == "auto":
         try:
@@ -201,17 +228,59 @@ def resolve_files(obs, nav):
                 nav = str(data.path(DEFAULT_NAV))
         except data.DataUnavailable as e:
             raise data.DataUnavailable(f"{e}; or {hint}") from None
-    rinex_obs.check_observation_file(obs)  # an obs/nav mix-up is named before nav lookup
+    obs = as_paths(obs)
+    for one in ([obs] if isinstance(obs, str) else obs):
+        rinex_obs.check_observation_file(one)  # an obs/nav mix-up is named before nav lookup
     if nav == "auto":
-        p = Path(obs)
-        cand = p.with_name(p.name[:-1] + "n") if p.name[-1:] in "oO" else None
-        if cand is None or not cand.is_file():
-            raise ValueError(f"no navigation file given for {obs} and none found beside it "
-                             f"(RINEX 2 naming, .yyo -> .yyn); {hint}")
-        nav = str(cand)
-    if not Path(nav).is_file():
-        raise ValueError(f"navigation file {nav} not found; {hint}")
+        nav = navigation_beside(obs if isinstance(obs, str) else obs[0], hint)
+    nav = as_paths(nav)
+    for one in ([nav] if isinstance(nav, str) else nav):
+        if not Path(one).is_file():
+            raise ValueError(f"navigation file {one} not found; {hint}")
     return obs, nav
+
+
+#: a RINEX 3 long file name: station, data source, year, day of year (RINEX 3.04 4.1)
+_LONG_NAME = re.compile(r"^[A-Z0-9]{9}_[A-Z]_(\d{4})(\d{3})\d{4}_", re.IGNORECASE)
+#: a RINEX 2 short observation name: ssssddd[h|0].yyo (RINEX 2.11 4)
+_SHORT_NAME = re.compile(r"^[a-z0-9]{4}(\d{3})[a-x0-9]\.(\d{2})[od]", re.IGNORECASE)
+
+
+def navigation_beside(obs, hint):
+    """The navigation file(s) of an observation file's day in its folder, 'auto':
+    RINEX 2 ``name.yyn`` beside ``name.yyo``; else, by the day in the file name (RINEX 3 long
+    name or RINEX 2 short name), the IGS merged daily file (``oaraim.data.brdc_candidates``,
+    gzipped or not), any ``*_YYYYDDD*_MN.rnx`` file, or a ``GN`` + ``EN`` pair of the day.
+    One line naming what was looked for when none is there."""
+    p = Path(obs)
+    cand = p.with_name(p.name[:-1] + "n") if p.name[-1:] in "oO" else None
+    if cand is not None and cand.is_file():
+        return str(cand)
+    m = _LONG_NAME.match(p.name)
+    m2 = _SHORT_NAME.match(p.name)
+    if m:
+        year, doy = int(m.group(1)), int(m.group(2))
+    elif m2:
+        yy, doy = int(m2.group(2)), int(m2.group(1))
+        year = yy + (1900 if yy >= 80 else 2000)
+    else:
+        raise ValueError(f"no navigation file given for {obs} and its name says no day (RINEX "
+                         f"2 .yyo or RINEX 3 long name); {hint}")
+    folder = p.parent
+    names = data.brdc_candidates(year, doy)
+    for n in names + [n[:-3] for n in names if n.endswith(".gz")]:
+        if (folder / n).is_file():
+            return str(folder / n)
+    tag = f"_{year:04d}{doy:03d}"
+    mixed = sorted(folder.glob(f"*{tag}*_MN.rnx*")) + sorted(folder.glob(f"*{tag}*_MN.RNX*"))
+    if mixed:
+        return str(mixed[0])
+    gn, en = sorted(folder.glob(f"*{tag}*_GN.rnx*")), sorted(folder.glob(f"*{tag}*_EN.rnx*"))
+    if gn:
+        return ",".join(str(x) for x in gn[:1] + en[:1])
+    raise ValueError(f"no navigation file given for {obs} and none of day {year}-{doy:03d} "
+                     f"beside it ({names[0]}, *{tag}*_MN.rnx or *_GN.rnx); get one with "
+                     f"`oaraim data nav YYYY-MM-DD`, or {hint}")
 
 
 def user_sigma_l1_m(el_rad):
@@ -408,10 +477,12 @@ class RinexReplay(Study):
                 "and replay each")
 
     params = {
-        "obs": Param("auto", parse_path, "RINEX 2/3 observation file ('auto': "
-                     f"{DEFAULT_OBS}, fetched if missing: `oaraim data list`)"),
-        "nav": Param("auto", parse_path, "RINEX 2/3 navigation file, GPS (+ Galileo) ('auto': "
-                     f"{DEFAULT_NAV} with the default obs, else the .yyn beside the obs file)"),
+        "obs": Param("auto", parse_paths, "RINEX 2/3 observation file, or several of one "
+                     f"receiver joined by ',' ('auto': {DEFAULT_OBS}, fetched if missing: "
+                     "`oaraim data list`)"),
+        "nav": Param("auto", parse_paths, "RINEX 2/3 navigation file, or several joined by ',' "
+                     f"(GN,EN) ('auto': {DEFAULT_NAV} with the default obs, else the day's "
+                     "file beside the obs file: .yyn, BRDC00IGS_R_..._MN, *_MN or *_GN + *_EN)"),
         "truth": Param("header", parse_truth, "true receiver position X,Y,Z (ECEF m) or "
                        "'header' (APPROX POSITION XYZ)", "m"),
         "mask_deg": Param(5.0, in_range(0.0, 60.0), "elevation mask (ARAIM practice 5 deg; "
@@ -575,7 +646,7 @@ class RinexReplay(Study):
             | dual_replay.dataset_extras(inp, out),
             # GPS PRN numbers (a string coordinate has no stable Zarr v3 encoding)
             coords={"epoch": np.arange(n_t), "sv": dual_replay.sv_numbers(obs.sv)},
-            attrs={"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
+            attrs={"obs_file": file_names(obs.path), "nav_file": file_names(nav_path),
                    "code": obs.code, "marker": obs.marker, "truth_ecef_m": list(truth),
                    "truth_source": truth_src, "truth_lat_lon_h": [lat, lon, h],
                    "start_gps": str(gpstime.to_datetime64(t[0]))[:19] if n_t else "",
@@ -586,7 +657,7 @@ class RinexReplay(Study):
                    "mhss_max_order": int(max_order), "sv_names": ",".join(obs.sv),
                    "combination": m["combination"],
                    "constellations": ",".join(m["constellations"])})
-        m.update({"obs_file": Path(obs.path).name, "nav_file": Path(nav_path).name,
+        m.update({"obs_file": file_names(obs.path), "nav_file": file_names(nav_path),
                   "code": obs.code, "truth_source": truth_src, "truth_ecef_m": list(truth),
                   "iono_model": inp["iono_model"], "mhss_max_order": int(max_order),
                   "gps_in_file": int(obs.sv.size), "skipped_epochs": len(obs.skipped),
@@ -598,7 +669,7 @@ class RinexReplay(Study):
                 f"truth: {truth_src}; {obs.code}, mask {params['mask_deg']:g} deg"
                 + (f"; {len(obs.skipped)} bad epochs skipped" if obs.skipped else ""))
         rows = [
-            {"quantity": f"median HPE, {Path(obs.path).name}", "unit": "m", "published": None,
+            {"quantity": f"median HPE, {file_names(obs.path)}", "unit": "m", "published": None,
              "reproduced": m["hpe_median_m"], "note": note},
             {"quantity": f"median HPL, ARAIM / MHSS ({BUDGET_NAMES[params['budget']]} "
              "budget)", "unit": "m", "published": None,
@@ -614,7 +685,8 @@ class RinexReplay(Study):
                      f"{m['misleading_information_epochs_slope']} of {m['epochs']} epochs"},
         ]
         return StudyResult(ds, rows, m, extra_provenance={
-            "obs_file": obs.path, "nav_file": str(nav_path), "truth_source": truth_src,
+            "obs_file": obs.path, "truth_source": truth_src,
+            "nav_file": nav_path if isinstance(nav_path, str) else ",".join(nav_path),
             "skipped_epochs": list(obs.skipped),
             "fault_modes": params["fault_modes"], "budget": params["budget"]})
 
@@ -693,7 +765,7 @@ def check_coverage(ephemeris, t_gps_s, nav_path, allow_gaps=False):
     if gaps.any() and not allow_gaps:
         bad = np.flatnonzero(gaps)
         first = str(gpstime.to_datetime64(np.asarray(t_gps_s)[bad[0]]))[:19]
-        raise ValueError(f"{Path(nav_path).name}: no usable GPS orbits for most satellites at "
+        raise ValueError(f"{file_names(nav_path)}: no usable GPS orbits for most satellites at "
                          f"{bad.size} of {np.size(t_gps_s)} observation epochs (from {first} "
                          "GPS time); the navigation file is of another day or cut short: give "
                          "the day's file with --set nav=FILE, or --set allow_gaps=yes to "
