@@ -65,3 +65,20 @@ def test_ramp_detected_earlier_by_the_bank(study_runs):
     test (seed 000's test waits for the innovation, the bank sees the drift)."""
     r = study_runs[1.0].metrics["scenarios"]["ramp"]
     assert r["filter_ss"]["detected_runs_pct"] >= r["ekf_xi_slope"]["detected_runs_pct"]
+
+
+def test_seed_drive_study_monitor_option_adds_rows_and_changes_none():
+    """``--set monitor=filter-ss-overbound`` on seed000-ekf-raim: the seed's own rows are those
+    of the default run, bit for bit, and three rows of the filter monitors follow (30 s of the
+    drive, 16 runs, no sensitivity runs)."""
+    study = STUDIES["seed000-ekf-raim"]
+    base = {"duration_s": "30", "sens_mp_sigma_m": "0"}
+    a = study.run(study.validate(base), 16, 0, None)
+    b = study.run(study.validate({**base, "monitor": "filter-ss-overbound"}), 16, 0, None)
+    assert b.rows[:len(a.rows)] == a.rows
+    extra = b.rows[len(a.rows):]
+    assert len(extra) == 3 and "filter solution separation" in extra[0]["quantity"]
+    assert "filter_ss" not in a.metrics and set(b.metrics["filter_ss"]) == {
+        "filter_ss", "ekf_xi_slope", "snapshot_mhss"}
+    with pytest.raises(ValueError, match="monitor must be one of"):
+        study.validate({"monitor": "bank"})

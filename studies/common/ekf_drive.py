@@ -29,6 +29,7 @@ from oaraim.studies.base import (
     count,
     in_range,
     non_negative,
+    parse_choice,
     parse_recording,
     positive,
     probability,
@@ -156,6 +157,14 @@ class EkfDriveStudy(Study):
             "drive_dir": Param("", parse_path, "keep the synthesized drive recording in this "
                                "folder (default: temporary)"),
             "chunk": Param(64, count(1), "runs per progress step (never changes a result)"),
+            "monitor": Param("ekf-raim", parse_choice("ekf-raim", "filter-ss",
+                                                      "filter-ss-overbound"),
+                             "integrity monitor: 'ekf-raim' (the seeds' NIS + Xi-slope HPL) or "
+                             "'filter-ss' (also the solution-separation filter bank of "
+                             "docs/filter-integrity.md on the same Monte Carlo runs, beside the "
+                             "Xi-slope HPL and the snapshot MHSS; the seeds' rows unchanged); "
+                             "'filter-ss-overbound': the filters' variance inflated by the GM "
+                             "multipath overbound"),
         }
         for key, value in self.calibrated.items():
             self.params[key] = dataclasses.replace(
@@ -199,6 +208,40 @@ class EkfDriveStudy(Study):
                 progress.advance(target - advanced)
                 advanced = target
         return {k: np.concatenate(v) for k, v in out.items()}
+
+    def _filter_ss(self, p, setup, n, seed):
+        """The filter bank, the Xi-slope HPL and the snapshot MHSS on the nominal Monte Carlo
+        runs (the same keys, so the same worlds; ``sim.simulate_filter_drive``, its defaults:
+        P_s 1e-5 per tower, seed 004 Table I budget), the study's fault as a step. Returns
+        per monitor the misleading epochs after the onset, mean HPL, availability at HAL,
+        false alerts and the median detection delay (JSON values)."""
+        cfg = sim.FilterDriveConfig(
+            hal_m=p["hal_m"], gm_inflation=float(p["monitor"] == "filter-ss-overbound"))
+        err = world_of(p)._replace(fault_onset_s=np.inf)
+        fault = sim.FaultScenario(np.asarray(p["fault_tower"] - 1), np.asarray(
+            p["fault_onset_s"]), np.asarray(p["fault_bias_m"]), np.asarray(0.0))
+        fn = _filter_ss_fn(cfg)
+        parts = []
+        for start in range(0, n, MC_BATCH):
+            keys = mc.realization_keys(seed, 0, start, MC_BATCH)
+            s = fn(keys, setup, err, fault, p["filter_sigma_pr_m"])
+            m = min(MC_BATCH, n - start)
+            parts.append(jax.tree.map(lambda x, m=m: np.asarray(x)[:m], s))
+        r = {k: np.concatenate([getattr(x, k) for x in parts]) for k in parts[0]._fields}
+        out = {}
+        for i, mon in enumerate(sim.filter_drive.MONITORS):
+            nn = int(r["n_at_risk"].sum())
+            fin = max(int(r["n_finite"][:, i].sum()), 1)
+            delay = r["detection_delay_s"][:, i]
+            out[mon] = {
+                "misleading_epochs": mc.rate_with_interval(int(r["n_misleading"][:, i].sum()),
+                                                           nn),
+                "mean_hpl_m": float(r["hpl_sum_m"][:, i].sum() / fin),
+                "availability_pct": 100.0 * float(r["n_available"][:, i].sum()) / max(nn, 1),
+                "false_alerts": int(r["n_false_alerts"][:, i].sum()),
+                "detected_runs_pct": 100.0 * float(np.mean(np.isfinite(delay))),
+                "median_detection_delay_s": float(np.median(delay))}
+        return out
 
     # ------------------------------------------------------------------ run
     def run(self, params, realizations, seed, progress):
@@ -247,6 +290,8 @@ class EkfDriveStudy(Study):
             ds = ds.merge(self._mc_dataset(mcres, realizations))
             ds.attrs["mc_epochs_per_run"] = n_ep
             ds.attrs["mc_pre_onset_epochs"] = int(np.sum(np.asarray(setup.t_s[:n_ep]) < onset))
+            if p["monitor"] != "ekf-raim":
+                filter_ss = self._filter_ss(p, setup, realizations, seed)
         elif progress is not None:
             progress.advance(realizations)
         ds.attrs.update({"single_drive_source": single_src, "hal_m": p["hal_m"],
@@ -257,6 +302,9 @@ class EkfDriveStudy(Study):
                          "p_fa": p["p_fa"], "p_md": p["p_md"]})
         rows, metrics = self._rows_metrics(p, tr, single, mcres, ds, realizations)
         metrics["single_drive_source"] = single_src
+        if p["monitor"] != "ekf-raim" and mcres:
+            rows += filter_ss_rows(filter_ss, realizations)
+            metrics["filter_ss"] = filter_ss
         return StudyResult(ds, rows, metrics, extra_provenance=prov)
 
     def _trace_dataset(self, tr, p):
@@ -548,6 +596,42 @@ class EkfDriveStudy(Study):
 
 
 _MC_FN = None
+
+
+FILTER_SS_LABELS = {"filter_ss": "filter solution separation",
+                    "ekf_xi_slope": "EKF NIS + Xi-slope", "snapshot_mhss": "snapshot MHSS"}
+
+
+def filter_ss_rows(fs, n):
+    """The summary rows of ``--set monitor=filter-ss`` (``EkfDriveStudy._filter_ss``)."""
+    rows = []
+    for mon, d in fs.items():
+        m = d["misleading_epochs"]
+        rows.append({
+            "quantity": f"HPE > HPL without alert after the onset, {FILTER_SS_LABELS[mon]}, "
+                        f"Monte Carlo {n} runs", "unit": "-", "published": None,
+            "reproduced": m["rate"],
+            "note": f"{m['count']} of {m['trials']} epochs, 95 % CI [{m['ci_low']:.2g}, "
+                    f"{m['ci_high']:.2g}]; mean HPL {d['mean_hpl_m']:.3g} m, available at HAL "
+                    f"{d['availability_pct']:.3g} %, alerts before the onset "
+                    f"{d['false_alerts']}, detected in {d['detected_runs_pct']:.3g} % of runs, "
+                    f"median delay {d['median_detection_delay_s']:.3g} s "
+                    "(docs/filter-integrity.md)"})
+    return rows
+
+
+_FILTER_SS_FNS = {}
+
+
+def _filter_ss_fn(cfg):
+    """The jitted vmapped ``sim.simulate_filter_drive`` of one (static) config."""
+    if cfg not in _FILTER_SS_FNS:
+        def f(keys, setup, err, fault, filter_sigma):
+            return jax.vmap(lambda k: sim.simulate_filter_drive(
+                k, setup, err, fault, cfg, filter_sigma_pr_m=filter_sigma))(keys)
+
+        _FILTER_SS_FNS[cfg] = jax.jit(f)
+    return _FILTER_SS_FNS[cfg]
 
 
 def _mc_fn():
