@@ -29,7 +29,8 @@ from oaraim.studies.base import (
     keyword_or_file,
     parse_choice,
 )
-from oaraim.studies.rinex_replay import RinexReplay, parse_faults, parse_truth
+from oaraim.studies.common.injected_faults import parse_faults
+from oaraim.studies.rinex_replay import RinexReplay, parse_truth
 
 #: the shared day replayed by default (``oaraim data list``)
 DEFAULT_OBS = "obs3/NIST00USA_R_20230010000_01D_30S_MO.crx.gz"

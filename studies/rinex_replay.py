@@ -44,7 +44,6 @@ Choices (none of them tuned on the results):
 """
 
 import json
-import re
 import warnings
 from pathlib import Path
 
@@ -63,12 +62,18 @@ from oaraim.studies.base import (
     count,
     fault_modes_param,
     in_range,
-    keyword_or_file,
     parse_choice,
     positive,
     probability,
 )
 from oaraim.studies.common import dual_replay
+from oaraim.studies.common.injected_faults import fault_bias_m, parse_faults, unmonitored
+from oaraim.studies.common.rinex_files import (
+    as_paths,
+    file_names,
+    navigation_beside,
+    parse_paths,
+)
 from oaraim.studies.common.seed004 import B_NOM_GPS, P_CONST_GPS_PARAM, P_SAT_GPS
 from oaraim.studies.common.stanford import draw_stanford, stanford_counts
 
@@ -96,33 +101,6 @@ SYSTEMS_OF = {"auto": "GE", "gps": "G", "galileo": "E"}
 STANFORD_AXES = (("horizontal", "hpe", "hpl", "hal_m"), ("vertical", "vpe", "vpl", "val_m"))
 
 
-#: 'auto' (the shared data file) or an existing file
-parse_path = keyword_or_file(("auto",), "RINEX file")
-
-
-def parse_paths(name, v):
-    """'auto', or one or more existing files joined by ',' (hourly observation files of one
-    receiver; a station's separate GN and EN navigation files) -> 'auto' or the resolved
-    paths joined by ','."""
-    parts = [x.strip() for x in (v if isinstance(v, (list, tuple)) else str(v).split(","))]
-    parts = [x for x in parts if x]
-    if parts == ["auto"] or not parts:
-        return parse_path(name, "auto")
-    return ",".join(parse_path(name, x) for x in parts)
-
-
-def as_paths(v):
-    """The path, or the list of paths, of a ``parse_paths`` value (one file: a string)."""
-    parts = str(v).split(",")
-    return parts[0] if len(parts) == 1 else parts
-
-
-def file_names(v):
-    """The files' names for titles and summaries ('a + b' for several); ``v`` a path, a list
-    of paths or paths joined by ','."""
-    parts = [v] if isinstance(v, (str, Path)) else list(v)
-    return " + ".join(Path(y.strip()).name for x in parts for y in str(x).split(","))
-
 
 def parse_truth(name, v):
     """'header' (APPROX POSITION XYZ) or 'X,Y,Z' ECEF metres."""
@@ -142,70 +120,6 @@ def parse_truth(name, v):
                          f"and 6,500 km), got {v!r} (|X| = {r / 1e3:.1f} km)")
     return xyz
 
-
-FAULT_KINDS = ("step", "ramp")
-
-
-def parse_faults(name, v):
-    """'none' or 'SV,KIND,SIZE,ONSET_S[;...]' (``FAULT_KINDS``: step SIZE in m, ramp in m/s)
-    -> the canonical text ('none' or the faults joined by ';')."""
-    s = str(v).strip()
-    if s in ("", "none"):
-        return "none"
-    out = []
-    for part in s.split(";"):
-        f = [x.strip() for x in part.split(",")]
-        try:
-            sv, kind, size, onset = f[0].upper(), f[1], float(f[2]), float(f[3])
-            ok = (len(f) == 4 and len(sv) == 3 and sv[0].isalpha() and sv[1:].isdigit()
-                  and kind in FAULT_KINDS and np.isfinite(size) and np.isfinite(onset)
-                  and onset >= 0)
-        except (IndexError, ValueError):
-            ok = False
-        if not ok:
-            raise ValueError(f"{name} must be 'none' or SV,step,BIAS_M,ONSET_S or "
-                             "SV,ramp,RATE_M_PER_S,ONSET_S (e.g. G05,ramp,0.5,600; onset "
-                             f"seconds after the first epoch, >= 0), got {part.strip()!r}")
-        out.append(f"{sv},{kind},{size:g},{onset:g}")
-    return ";".join(out)
-
-
-def fault_bias_m(fault, t_gps_s, sv):
-    """(T, S) pseudorange errors of the ``fault`` text (``parse_faults``) at the epochs
-    ``t_gps_s`` on the satellites ``sv`` (zeros for 'none'); an SV not in ``sv``: one-line
-    error."""
-    t = np.asarray(t_gps_s, np.float64)
-    bias = np.zeros((t.size, len(sv)))
-    if fault == "none":
-        return bias
-    names = [str(x) for x in sv]
-    for part in fault.split(";"):
-        s_v, kind, size, onset = part.split(",")
-        if s_v not in names:
-            raise ValueError(f"fault: {s_v} is not among the satellites used "
-                             f"({', '.join(names[:6])}...); pick one the file observes")
-        dt = t - (t[0] if t.size else 0.0) - float(onset)
-        on = dt >= 0
-        grow = float(size) * (dt if kind == "ramp" else 1.0)
-        bias[:, names.index(s_v)] += np.where(on, grow, 0.0)
-    return bias
-
-
-def unmonitored(out):
-    """``fde=off``: the MHSS and slope results of the user without the monitors' decisions:
-    all-in-view position errors and PLs at every epoch, nothing excluded. The LPV-200 share
-    keeps the EMT and sigma_acc of the solution the MHSS kept (the all-in-view one wherever it
-    detected nothing)."""
-    o = dict(out)
-    for kind in ("mhss", "slope"):
-        o[f"hpe_{kind}_m"], o[f"vpe_{kind}_m"] = out["hpe_m"], out["vpe_m"]
-        o[f"hpl_{kind}_m"] = out[f"hpl_{kind}_aiv_m"]
-        o[f"vpl_{kind}_m"] = out[f"vpl_{kind}_aiv_m"]
-        o[f"{kind}_excluded"] = np.zeros_like(out[f"{kind}_excluded"])
-        failed = out[f"{kind}_status"] == araim.Status.EXCLUSION_FAILED
-        o[f"{kind}_status"] = np.where(failed & np.isfinite(o[f"hpl_{kind}_m"]),
-                                       araim.Status.OK, out[f"{kind}_status"]).astype(np.int8)
-    return o
 
 
 def data_files(obs, nav):
@@ -238,49 +152,6 @@ def resolve_files(obs, nav):
         if not Path(one).is_file():
             raise ValueError(f"navigation file {one} not found; {hint}")
     return obs, nav
-
-
-#: a RINEX 3 long file name: station, data source, year, day of year (RINEX 3.04 4.1)
-_LONG_NAME = re.compile(r"^[A-Z0-9]{9}_[A-Z]_(\d{4})(\d{3})\d{4}_", re.IGNORECASE)
-#: a RINEX 2 short observation name: ssssddd[h|0].yyo (RINEX 2.11 4)
-_SHORT_NAME = re.compile(r"^[a-z0-9]{4}(\d{3})[a-x0-9]\.(\d{2})[od]", re.IGNORECASE)
-
-
-def navigation_beside(obs, hint):
-    """The navigation file(s) of an observation file's day in its folder, 'auto':
-    RINEX 2 ``name.yyn`` beside ``name.yyo``; else, by the day in the file name (RINEX 3 long
-    name or RINEX 2 short name), the IGS merged daily file (``oaraim.data.brdc_candidates``,
-    gzipped or not), any ``*_YYYYDDD*_MN.rnx`` file, or a ``GN`` + ``EN`` pair of the day.
-    One line naming what was looked for when none is there."""
-    p = Path(obs)
-    cand = p.with_name(p.name[:-1] + "n") if p.name[-1:] in "oO" else None
-    if cand is not None and cand.is_file():
-        return str(cand)
-    m = _LONG_NAME.match(p.name)
-    m2 = _SHORT_NAME.match(p.name)
-    if m:
-        year, doy = int(m.group(1)), int(m.group(2))
-    elif m2:
-        yy, doy = int(m2.group(2)), int(m2.group(1))
-        year = yy + (1900 if yy >= 80 else 2000)
-    else:
-        raise ValueError(f"no navigation file given for {obs} and its name says no day (RINEX "
-                         f"2 .yyo or RINEX 3 long name); {hint}")
-    folder = p.parent
-    names = data.brdc_candidates(year, doy)
-    for n in names + [n[:-3] for n in names if n.endswith(".gz")]:
-        if (folder / n).is_file():
-            return str(folder / n)
-    tag = f"_{year:04d}{doy:03d}"
-    mixed = sorted(folder.glob(f"*{tag}*_MN.rnx*")) + sorted(folder.glob(f"*{tag}*_MN.RNX*"))
-    if mixed:
-        return str(mixed[0])
-    gn, en = sorted(folder.glob(f"*{tag}*_GN.rnx*")), sorted(folder.glob(f"*{tag}*_EN.rnx*"))
-    if gn:
-        return ",".join(str(x) for x in gn[:1] + en[:1])
-    raise ValueError(f"no navigation file given for {obs} and none of day {year}-{doy:03d} "
-                     f"beside it ({names[0]}, *{tag}*_MN.rnx or *_GN.rnx); get one with "
-                     f"`oaraim data nav YYYY-MM-DD`, or {hint}")
 
 
 def user_sigma_l1_m(el_rad):
