@@ -7,6 +7,7 @@ import threading
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from oaraim.batching import map_threads, map_tiles, slice_rows
 
@@ -67,3 +68,28 @@ def test_nested_split_runs_without_waiting_for_itself():
     t.join(60)
     assert not t.is_alive(), "nested map_threads deadlocked"
     np.testing.assert_array_equal(np.asarray(result["out"]["sum"]), np.asarray(_fn(x, y)["sum"]))
+
+
+def test_the_old_araim_batching_names_still_work_and_warn():
+    """``oaraim.araim.batching`` (the helpers' home before ``oaraim.batching``) keeps its
+    names, renamed ones included (``CHUNK``, ``map_chunks``, ``chunk=``), each with a
+    DeprecationWarning naming the new one."""
+    import warnings
+
+    from oaraim import batching
+    from oaraim.araim import batching as old
+
+    with pytest.warns(DeprecationWarning, match="oaraim.batching.TILE"):
+        assert old.CHUNK == batching.TILE
+    with pytest.warns(DeprecationWarning, match="oaraim.batching.map_tiles"):
+        map_chunks = old.map_chunks
+    x, y = _inputs(3 * TILE + 2)
+    got = map_chunks(_kernel, (x, y), (x.shape[0],), chunk=TILE)
+    want = batching.map_tiles(_kernel, (x, y), (x.shape[0],), tile=TILE)
+    np.testing.assert_array_equal(got["sum"], want["sum"])
+    with pytest.warns(DeprecationWarning, match="oaraim.batching.bucket"):
+        assert old.bucket(200, chunk=128) == batching.bucket(200, tile=128)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+            old.nothing  # noqa: B018
