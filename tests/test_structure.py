@@ -129,10 +129,10 @@ def test_the_face_rule_finds_every_way_past_a_face(structure, tmp_path):
     assert [line.split(" -> ")[0] for line in found] == [
         "oaraim.studies.a:4: from oaraim.araim.core import f",
         "oaraim.studies.a:5: from oaraim.araim.ns import k",
-        "oaraim.studies.a:7: araim.hidden",
+        "oaraim.studies.a:7: araim.hidden.h",
     ]
     assert "`from oaraim import araim` and `araim.f`" in found[0]
-    assert "export each NAME in araim/__init__.py" in found[2]
+    assert "`araim.h` (export h in araim/__init__.py" in found[2]
 
 
 def test_the_widest_public_signature_does_not_grow(rep, structure):

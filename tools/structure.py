@@ -186,12 +186,15 @@ def scan(root: Path = ROOT):
                     reaches.append((mod, node.lineno, tgt, f"from {src} import {a.name}"))
                     if _is_private(a.name) and not _gathers(mod, is_pkg, tgt):
                         private.append((mod, node.lineno, f"from {src} import {a.name}"))
+        used_as = {id(n.value): n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
                     and node.value.id in aliases
                     and f"{aliases[node.value.id]}.{node.attr}" in known):
+                # ``araim.mhss.required_order``: the name used, if the reach is followed by one
+                then = f".{used_as[id(node)]}" if id(node) in used_as else ""
                 reaches.append((mod, node.lineno, f"{aliases[node.value.id]}.{node.attr}",
-                                f"{node.value.id}.{node.attr}"))
+                                f"{node.value.id}.{node.attr}{then}"))
             if (isinstance(node, ast.Attribute) and _is_private(node.attr)
                     and isinstance(node.value, ast.Name) and node.value.id in aliases
                     and aliases[node.value.id] != mod):
@@ -274,7 +277,8 @@ def face_bypasses(root: Path = ROOT) -> list[str]:
         if layer not in FACED or layer_of(mod) == layer:
             continue
         face = f"oaraim.{layer}"
-        name = text.rsplit(" import ", 1)[-1] if " import " in text else text.split(".", 1)[1]
+        name = (text.rsplit(" import ", 1)[-1] if " import " in text
+                else text.split(".")[1] if text.count(".") == 1 else text.split(".")[2])
         if target == f"{face}.{name}" and name in exported[face]:
             continue  # the face exports a name spelled like its module (araim.slopes)
         through_namespace = any(target == ns or target.startswith(ns + ".") for ns in public)
@@ -282,7 +286,8 @@ def face_bypasses(root: Path = ROOT) -> list[str]:
                 text.startswith("from ") and name in exported[face])):
             continue  # a namespace's own names; a name the face exports comes from the face
         sub = target[len(face) + 1:]
-        if text.startswith(("from ", "import ")) and not target.endswith("." + name):
+        if (text.startswith(("from ", "import ")) and not target.endswith("." + name)
+                or text.count(".") == 2):
             fix = (f"`from oaraim import {layer}` and `{layer}.{name}` (export {name} in "
                    f"{layer}/__init__.py if it is not there)")
         else:
