@@ -4,8 +4,10 @@
 offers (RINEX 3 observation codes of ``geometry.rinex_obs.read_observation_table``):
 
 * GPS L1/L5: C1C with C5Q, C5X or C5I (the ARAIM default, ADD);
-* GPS L1/L2: C1C with C2W, the fallback where a GPS satellite has no L5 (in 2023-2024 only
-  the Block IIF and III satellites transmit it);
+* GPS L1/L2: C1C with C2W, else with the civil L2C (C2L, C2X, C2S) for a receiver that does
+  not track the semi-codeless P(Y) (its L2C - L2P(Y) bias, a fraction of a nanosecond, stays
+  under b_nom like the P1-C1 DCB below); the fallback where a GPS satellite has no L5 (in
+  2023-2024 only the Block IIF and III satellites transmit it);
 * Galileo E1/E5a: C1C, C1X or C1B with C5Q, C5X or C5I.
 
 P_IF = (f1^2 P1 - f2^2 P2) / (f1^2 - f2^2) removes the first-order ionospheric delay; its
@@ -30,7 +32,7 @@ Group delays (what the broadcast clocks refer to, and what is not corrected here
   the L1/L2 reference before use: ``l5_offsets_m`` is, per satellite, the median over the
   file of P_IF(L1/L5) - P_IF(L1/L2) at the epochs both are observed (noise about 0.7 m per
   epoch, so a few centimetres over an hour), and it is subtracted. A satellite with L5 that
-  is never seen with C2W keeps its L1/L5 uncorrected (``l5_offset_m`` NaN; a receiver
+  is never seen with an L2 code keeps its L1/L5 uncorrected (``l5_offset_m`` NaN; a receiver
   without L2 altogether has no way to do better without the CNAV ISCs).
   ``gps_pair="l1l5-raw"`` uses L1/L5 uncorrected (to study the bias).
 * The Galileo F/NAV clock refers to the E1/E5a ionosphere-free combination (OS SIS ICD
@@ -60,7 +62,7 @@ SINGLE = ((GPS_L1, "G", ("C1C",)), (GAL_E1, "E", ("C1C", "C1X", "C1B")))
 #: (combination, system letter, codes of f1 by preference, codes of f2, f1, f2)
 PAIRS = (
     (GPS_L1L5, "G", ("C1C",), ("C5Q", "C5X", "C5I"), F_L1_HZ, F_L5_HZ),
-    (GPS_L1L2, "G", ("C1C",), ("C2W",), F_L1_HZ, F_L2_HZ),
+    (GPS_L1L2, "G", ("C1C",), ("C2W", "C2L", "C2X", "C2S"), F_L1_HZ, F_L2_HZ),
     (GAL_E1E5A, "E", ("C1C", "C1X", "C1B"), ("C5Q", "C5X", "C5I"), F_E1_HZ, F_E5A_HZ),
 )
 
@@ -82,7 +84,7 @@ class IonoFree(NamedTuple):
     """(T, S) ``factor`` of that pair (1 where none)."""
     l5_offset_m: np.ndarray
     """(S,) the median P_IF(L1/L5) - P_IF(L1/L2) removed from a GPS satellite's L1/L5 (module
-    docstring), metres; NaN where none was removed (no L5, never seen with C2W, or a
+    docstring), metres; NaN where none was removed (no L5, never seen with L2, or a
     ``gps_pair`` other than ``"l1l5"``)."""
 
 

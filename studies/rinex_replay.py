@@ -447,7 +447,8 @@ class RinexReplay(Study):
                                         & (inp["combination"] == 1).any(0)]]
             if raw and params["gps_pair"] == "l1l5":
                 warnings.warn(f"{len(raw)} GPS satellites ({', '.join(raw[:4])}) have L5 but "
-                              "no C2W in the file: their L1/L5 cannot be referred to L1/L2 and "
+                              "no L2 code (C2W, C2L, C2X, C2S) in the file: their L1/L5 cannot be "
+                              "referred to L1/L2 and "
                               "keeps metres of inter-signal bias (gps_l5_uncorrected in the "
                               "summary); --set gps_pair=l1l2 avoids it", stacklevel=2)
         elif params["constellations"] == "galileo":
