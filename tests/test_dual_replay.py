@@ -154,3 +154,48 @@ def test_single_frequency_gps_galileo_option(shared_data):
     assert m["hpe_median_m"] == pytest.approx(0.392, abs=0.01)
     assert m["hpl_median_m"] == pytest.approx(59.57, rel=1e-2)
     assert m["misleading_information_epochs"] == 0
+
+
+def _hide_codes(src, dst, subs):
+    """``src`` CRINEX decompressed to ``dst`` with GPS observation codes renamed in the header
+    (``subs``: (old, new) pairs; a renamed code is one the replay does not use), the data
+    untouched."""
+    import hatanaka
+
+    text = hatanaka.decompress(src.read_bytes()).decode()
+    end = text.index("END OF HEADER")
+    out, system = [], ""
+    for line in text[:end].split("\n"):
+        if "SYS / # / OBS TYPES" in line:
+            system = line[0] if line[0] != " " else system
+            if system == "G":
+                for old, new in subs:
+                    line = line.replace(old, new)
+        out.append(line)
+    dst.write_text("\n".join(out) + text[end:])
+    return dst
+
+
+@pytest.mark.parametrize(("subs", "detections", "uncorrected"), [
+    ((("C2W", "C2Z"),), 0, []),
+    ((("C2W", "C2Z"), ("C2X", "C2Y")), 107, ["G04", "G18", "G23", "G25", "G26", "G28"]),
+], ids=["no-C2W", "no-L2"])
+def test_receivers_without_semicodeless_l2(shared_data, tmp_path, subs, detections,
+                                           uncorrected):
+    """The TLSE hour as a receiver without C2W would record it: L2C (C2X) takes its place in
+    L1/L2 and refers L1/L5 to it (no detection). Without any L2 code the L1/L5 offsets cannot
+    be removed: the satellites are listed and a warning says so (measured 107 detections, 0
+    misleading epochs)."""
+    obs = _hide_codes(shared_data / TLSE[0], tmp_path / "TEST00FRA_R_20240011800_01H_30S_MO.rnx",
+                      subs)
+    study = STUDIES["rinex-replay"]
+    params = study.validate({"obs": str(obs), "nav": str(shared_data / TLSE[1])})
+    if uncorrected:
+        with pytest.warns(UserWarning, match="have L5 but no L2 code"):
+            m = study.run(params, 120, 0, None).metrics
+    else:
+        m = study.run(params, 120, 0, None).metrics
+    assert m["detections_mhss"] == detections
+    assert m["gps_l5_uncorrected"] == uncorrected
+    assert m["misleading_information_epochs"] == 0
+    assert ("GPS L1/L2" in m["combination"]) == (not uncorrected)
