@@ -16,6 +16,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.chi2 import lambda_det_table
@@ -90,7 +92,8 @@ def _invalid_input(g, sigma_m, valid):
     return jnp.any(valid & ~ok, axis=-1)
 
 
-def slopes_kernel(g, sigma_m, valid) -> Slopes:
+def slopes_kernel(g: Float[ArrayLike, "*batch L 3"], sigma_m: Float[ArrayLike, "*batch L"],
+                  valid: Bool[ArrayLike, "*batch L"]) -> Slopes:
     """The RAIM slopes of ``slopes`` as a pure JAX function of arrays of one batch shape: g
     (..., L, 3), sigma_m and valid (..., L) (standard deviations in metres, bool). Callable
     inside ``jax.jit`` and ``jax.vmap`` (one program, no tiling). A geometry with a
@@ -139,7 +142,9 @@ def _slopes_tiled(g, sigma_m, valid):
                      g.shape[:-2], tile=SLOPE_TILE)
 
 
-def _slope_hpl_body(g, sigma_m, valid, lambda_table):
+def _slope_hpl_body(g: Float[ArrayLike, "*batch L 3"], sigma_m: Float[ArrayLike, "*batch L"],
+                    valid: Bool[ArrayLike, "*batch L"],
+                    lambda_table: Float[ArrayLike, " dof"]) -> SlopeHPL:
     """The slope HPL of ``slope_hpl`` as a jitted JAX function of arrays
     of one batch shape (one program, no tiling; inline under a caller's ``jit`` or ``vmap``):
     ``slope_hpl_kernel(g, sigma_m, valid, lambda_table) -> SlopeHPL`` with g (..., L, 3), sigma_m
@@ -157,7 +162,9 @@ slope_hpl_kernel = jax.jit(_slope_hpl_body)
 
 
 @jax.jit
-def slope_hpl_tiled(g, sigma_m, valid, lambda_table):
+def slope_hpl_tiled(g: Float[ArrayLike, "*batch L 3"], sigma_m: Float[ArrayLike, "*batch L"],
+                    valid: Bool[ArrayLike, "*batch L"],
+                    lambda_table: Float[ArrayLike, " dof"]) -> SlopeHPL:
     """``slope_hpl_kernel`` in tiles of ``SLOPE_TILE`` (batches of at most one tile at their
     own shape): what ``slope_hpl`` runs after its argument checks, and what ``oaraim bench``
     times. Arguments and result as ``slope_hpl_kernel``."""
@@ -165,7 +172,9 @@ def slope_hpl_tiled(g, sigma_m, valid, lambda_table):
                      g.shape[:-2], tile=SLOPE_TILE)
 
 
-def slopes(g, sigma_m, valid=None) -> Slopes:
+def slopes(g: Real[ArrayLike, "*batch L 3"],
+           sigma_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+           valid: Bool[ArrayLike, "*#batch #L"] | None = None) -> Slopes:
     """RAIM slopes of every source, seed 001 section 3.1 (weighted, one receiver clock).
 
     Args:
@@ -201,7 +210,10 @@ def _named_invalid_input(result, g, sigma_m, valid):
     raise AssertionError("the kernel's INVALID_INPUT and the host checks disagree")
 
 
-def slope_hpl(g, sigma_m, p_fa, p_md, valid=None) -> SlopeHPL:
+def slope_hpl(g: Real[ArrayLike, "*batch L 3"],
+              sigma_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+              p_fa: float, p_md: float,
+              valid: Bool[ArrayLike, "*#batch #L"] | None = None) -> SlopeHPL:
     """Slope-based HPL of chi-square snapshot RAIM, seed 001 section 3.1.
 
     HPL = slope_max sqrt(lambda_det), where lambda_det is the non-centrality of the residual
