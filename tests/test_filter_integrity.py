@@ -82,3 +82,18 @@ def test_seed_drive_study_monitor_option_adds_rows_and_changes_none():
         "filter_ss", "ekf_xi_slope", "snapshot_mhss"}
     with pytest.raises(ValueError, match="monitor must be one of"):
         study.validate({"monitor": "bank"})
+
+
+def test_uav_study_monitor_option_adds_rows_and_changes_none(shared_data):
+    """``--set monitor=filter-ss`` on seed004-uav (120 epochs, no exclusion replay): the
+    paper's rows are the default run's, and the constant-velocity filter bank on GPS + all
+    SOPs adds two rows with a finite HPL at every epoch."""
+    study = STUDIES["seed004-uav"]
+    base = {"n_epochs": "120", "exclusion": "false"}
+    a = study.run(study.validate(base), 120, 0, None)
+    b = study.run(study.validate({**base, "monitor": "filter-ss"}), 120, 0, None)
+    assert b.rows[:len(a.rows)] == a.rows
+    assert len(b.rows) == len(a.rows) + 2
+    fs = b.metrics["filter_ss"]
+    assert fs["finite_hpl_epochs"] == 120 and fs["status_counts"] == {0: 120}
+    assert 0.0 < fs["mean_hpl_m"] < 100.0

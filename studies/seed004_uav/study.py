@@ -35,6 +35,7 @@ from oaraim.studies.common.seed004 import (
     resolve_sky,
 )
 from oaraim.studies.common.stanford import stanford_counts
+from oaraim.studies.seed004_uav import filter_ss
 from oaraim.studies.seed004_uav.plots import plot_uav
 from oaraim.studies.seed004_uav.towers import tower_operators, towers_enu_m
 
@@ -268,6 +269,9 @@ class Seed004Uav(Study):
                            "(~2 min per 2880 epochs on 2 CPU cores)"),
         "hal_m": Param(40.0, positive, "horizontal alert limit of the Stanford diagrams "
                        "(LPV-200)", "m"),
+        "monitor": Param("mhss", parse_choice("mhss", "filter-ss"), "integrity monitor: the "
+                         "snapshot MHSS of the paper, or also the solution-separation filter "
+                         "bank on GPS + all SOPs (docs/filter-integrity.md; its rows added)"),
         "recording": Param(NO_RECORDING, parse_recording, "replay a recorded flight (folder in the "
                            "geometry.recording format) instead of synthesizing"),
         "chunk": Param(BLOCK, count(1), "accepted for the common interface and ignored "
@@ -322,8 +326,16 @@ class Seed004Uav(Study):
                             tw_idx[order[:1]], params)
         if progress is not None:
             progress.advance(int(realizations))
-        return self._result(params, geom, desc, configs, res, orders, excl, fault,
-                            [str(geom.ids[tw_idx[j]]) for j in order], group_names, cons)
+        out = self._result(params, geom, desc, configs, res, orders, excl, fault,
+                           [str(geom.ids[tw_idx[j]]) for j in order], group_names, cons)
+        if params["monitor"] == "filter-ss":
+            use = geom.valid & (geom.is_gps | np.isin(np.arange(geom.valid.shape[1]), tw_idx))
+            *_, fs = filter_ss.filter_monitor(geom, pr, corr, var_int, use, cons, p_sat,
+                                              p_const, x0, self.fault_modes, orders[-1],
+                                              params["hal_m"])
+            out.rows.extend(filter_ss.filter_rows(fs, res["hpl"][-1], params["hal_m"]))
+            out.metrics["filter_ss"] = fs
+        return out
 
     # ----------------------------------------------------------------- pieces
     def _config(self, geom, pr, corr, var_int, var_acc, use, cons, p_sat, b_nom, p_const, x0):
