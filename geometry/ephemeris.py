@@ -37,6 +37,7 @@ import os
 import re
 import warnings
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -160,7 +161,7 @@ def _navigation_text(path: Path) -> str:
     return raw.decode("ascii", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
 
 
-def check_navigation_file(path) -> dict:
+def check_navigation_file(path: str | os.PathLike) -> dict:
     """Structural check of a RINEX 2 (GPS) or 3 navigation file before georinex parses it.
 
     Returns the header facts ``{"version", "records", "systems"}``. Raises
@@ -632,8 +633,9 @@ def _merged(tables):
     return {k: v[keep] for k, v in t.items()}
 
 
-def load_navigation(path, systems=("G", "E"), max_age_s=DEFAULT_MAX_AGE_S,
-                    galileo_source=None) -> Ephemeris:
+def load_navigation(path: str | os.PathLike | Sequence[str | os.PathLike],
+                    systems: Sequence[str] = ("G", "E"), max_age_s: float = DEFAULT_MAX_AGE_S,
+                    galileo_source: str | None = None) -> Ephemeris:
     """Broadcast ephemerides of a RINEX 2 (GPS) or RINEX 3 navigation file (plain or .gz), or
     of several files read as one (a station's separate GPS ``GN`` and Galileo ``EN`` files, or
     consecutive days): their records merged, a record present in more than one file (same

@@ -20,7 +20,9 @@ E1/E5a (MGEX convention; the file's ``SYS / DCBS APPLIED`` lines say which biase
 """
 
 import gzip
+import os
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -48,7 +50,8 @@ class PreciseClocks(NamedTuple):
     """``TIME SYSTEM ID`` of the header (``"GPS"`` when absent)."""
 
 
-def read_clock_rinex(path, systems=None) -> PreciseClocks:
+def read_clock_rinex(path: str | os.PathLike, systems: Sequence[str] | None = None
+                     ) -> PreciseClocks:
     """The ``AS`` (satellite) clock records of a RINEX 3 clock file (plain text or .gz).
 
     Args:

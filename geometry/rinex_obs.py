@@ -35,6 +35,7 @@ import math
 import os
 import re
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -551,7 +552,8 @@ def _as_paths(path) -> list:
     return paths
 
 
-def read_observation_table(path, lenient=False) -> ObservationTable:
+def read_observation_table(path: str | os.PathLike | Sequence[str | os.PathLike],
+                           lenient: bool = False) -> ObservationTable:
     """Every observation of a RINEX 2/3 observation file, or of several files of one receiver.
 
     Forms: plain, gzip, CRINEX 1/3 (Hatanaka), CRINEX in gzip or compress. Every line is
@@ -598,7 +600,8 @@ def _l1_codes(path) -> tuple:
     return codes
 
 
-def read_observations(path, max_epochs=None, lenient=False) -> Observations:
+def read_observations(path: str | os.PathLike | Sequence[str | os.PathLike],
+                      max_epochs: int | None = None, lenient: bool = False) -> Observations:
     """GPS L1 code pseudoranges of a RINEX 2/3 observation file (plain, .gz or CRINEX), or of
     several files of one receiver (``read_observation_table``).
 
