@@ -15,13 +15,20 @@ linear in (cos el, sin el), so u(el) is a combination of three solves done once 
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Bool, Float
 
 from oaraim.araim import linalg
 from oaraim.araim.slopes import REDUNDANCY_TOLERANCE, masked_geometry
 
 
 @jax.jit
-def added_source_slope_max(g, sigma_m, az_added_rad, el_grid_rad, sigma_added_m, valid):
+def added_source_slope_max(g: Float[ArrayLike, "B M 3"], sigma_m: Float[ArrayLike, "B M"],
+                           az_added_rad: Float[ArrayLike, " B"],
+                           el_grid_rad: Float[ArrayLike, " E"],
+                           sigma_added_m: Float[ArrayLike, "#B"] | Float[ArrayLike, ""],
+                           valid: Bool[ArrayLike, "B M"]
+                           ) -> tuple[Float[Array, "B E"], Bool[Array, " B"]]:
     """Maximum slope after adding one source at azimuth ``az_added`` and each grid elevation.
 
     Args:

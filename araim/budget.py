@@ -21,6 +21,8 @@ needs the six numbers. Presets:
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Float, Real
 
 from oaraim.araim.validate import check_probability
 
@@ -78,7 +80,10 @@ BUDGET_LPV200_MAAST = IntegrityBudget(
     phmi_v=9.8e-8, phmi_h=2e-9, p_fa_v=3.9e-6, p_fa_h=9e-7, p_thresh=6e-8, p_emt=1e-5)
 
 
-def exposure_probability(p_instantaneous, exposure_s, mean_fault_duration_s):
+def exposure_probability(p_instantaneous: Real[ArrayLike, "..."],
+                         exposure_s: Real[ArrayLike, "..."],
+                         mean_fault_duration_s: Real[ArrayLike, "..."]
+                         ) -> Float[np.ndarray, "..."]:
     """The prior of a fault over an exposure window, ADD v4.2 (MAAST 2024: ``p (1 + tau)``,
     tau = T_exp / MFD): P (1 + T_exp / MFD), the probability that a fault with instantaneous
     probability P and mean duration MFD is present at some time within T_exp. Pass the result

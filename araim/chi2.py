@@ -13,6 +13,7 @@ of thresholds and protection radius using chi-square methods"; Walter & Enge 199
 from functools import lru_cache
 
 import numpy as np
+from jaxtyping import Float
 
 from oaraim.araim.validate import check_int, check_probability
 
@@ -51,7 +52,7 @@ def noncentrality(p_fa: float, p_md: float, dof: int) -> float:
 
 
 @lru_cache(maxsize=64)
-def lambda_det_table(p_fa: float, p_md: float, max_dof: int) -> np.ndarray:
+def lambda_det_table(p_fa: float, p_md: float, max_dof: int) -> Float[np.ndarray, " dof"]:
     """``table[d] = lambda_det(P_FA, P_MD, d)`` for d = 0..max_dof; ``table[0] = inf``.
 
     Cached: a sweep calls it once per (P_FA, P_MD) pair. The returned array is read-only.

@@ -23,13 +23,15 @@ What it does, step by step (each step a public function of its own layer):
 """
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Real
 
 from oaraim.araim.budget import BUDGET_LPV200, IntegrityBudget
 from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
-from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, fault_mode_rule
+from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, FaultModeRule, fault_mode_rule
 from oaraim.araim.mhss import MHSSResult, protection_levels
 from oaraim.araim.validate import check_range
 from oaraim.geometry import (
@@ -139,12 +141,15 @@ def _ism(ism, key, default):
     return v
 
 
-def epoch_protection_levels(lat_deg, lon_deg, h_m, t_gps_s, sky="nominal",
-                            towers: Sequence | None = None, *, mask_deg=5.0,
-                            budget: IntegrityBudget = BUDGET_LPV200, fault_modes=None,
-                            ism: dict | None = None, airborne_model="ed259a",
-                            max_order=None, constellations=("gps", "galileo"),
-                            allow_gaps=False) -> EpochLevels:
+def epoch_protection_levels(lat_deg: float, lon_deg: float, h_m: float,
+                            t_gps_s: Real[ArrayLike, " T"] | Real[ArrayLike, ""],
+                            sky: Any = "nominal", towers: Sequence | None = None, *,
+                            mask_deg: float = 5.0, budget: IntegrityBudget = BUDGET_LPV200,
+                            fault_modes: str | FaultModeRule | None = None,
+                            ism: dict | None = None, airborne_model: str = "ed259a",
+                            max_order: int | None = None,
+                            constellations: Sequence[str] = ("gps", "galileo"),
+                            allow_gaps: bool = False) -> EpochLevels:
     """The MHSS protection levels of a receiver at ``(lat_deg, lon_deg, h_m)`` (WGS-84) at
     GPS time(s) ``t_gps_s`` (a number or (T,) array; ``geometry.gpstime``), with the
     satellites of ``sky`` at or above ``mask_deg`` and the ``towers`` given.

@@ -56,6 +56,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Int
 
 from oaraim.araim import linalg
 from oaraim.araim.event_sets import event_tails, pad_row, per_set, stored_sum
@@ -209,7 +211,9 @@ class FaultModes(NamedTuple):
     P_NM instead)."""
 
 
-def fault_modes_batch_last(valid, constellation, p_sat, p_const, p_thresh, max_order: int):
+def fault_modes_batch_last(valid: Bool[ArrayLike, "L B"], constellation: Int[ArrayLike, "L B"],
+                           p_sat: Float[ArrayLike, "L B"], p_const: Float[ArrayLike, "C B"],
+                           p_thresh: float, max_order: int) -> FaultModes:
     """Live modes, exclusion sets and priors (static template), batch-last layout."""
     C = p_const.shape[0]
     L = valid.shape[0]
@@ -373,7 +377,7 @@ class FaultModeRule:
 DEFAULT_RULE = FaultModeRule()
 
 
-def fault_mode_rule(x) -> FaultModeRule:
+def fault_mode_rule(x: str | FaultModeRule | None) -> FaultModeRule:
     """A ``FaultModeRule`` from itself or its name (None: the default, ``add-v4.2``)."""
     if x is None:
         return DEFAULT_RULE

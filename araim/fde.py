@@ -20,11 +20,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Int, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
+    FaultModeRule,
     check_order,
     fault_mode_rule,
     to_batch_first,
@@ -222,9 +225,11 @@ def _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting, fau
                       iterations=check_int("iterations", iterations, 1), fault_modes=rule)
 
 
-def separation_kernel(sources: Sources, p_const, budget: IntegrityBudget, residual_m, *,
-                      max_order, all_in_view_weighting="int", fault_modes=None,
-                      iterations=PL_ITERATIONS) -> Separation:
+def separation_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
+                      budget: IntegrityBudget, residual_m: Float[ArrayLike, "*#batch L"], *,
+                      max_order: int, all_in_view_weighting: str = "int",
+                      fault_modes: str | FaultModeRule | None = None,
+                      iterations: int = PL_ITERATIONS) -> Separation:
     """The solution-separation test of ``solution_separation`` as a pure JAX function:
     callable inside ``jax.jit`` and ``jax.vmap`` (inline there), jitted on its own otherwise.
 
@@ -246,9 +251,12 @@ def separation_kernel(sources: Sources, p_const, budget: IntegrityBudget, residu
     return _separation(*args, residual_m, **static)
 
 
-def detect_and_exclude_kernel(sources: Sources, p_const, budget: IntegrityBudget, residual_m,
-                              *, max_order, all_in_view_weighting="int", fault_modes=None,
-                              iterations=PL_ITERATIONS) -> FDEResult:
+def detect_and_exclude_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
+                              budget: IntegrityBudget,
+                              residual_m: Float[ArrayLike, "*#batch L"], *, max_order: int,
+                              all_in_view_weighting: str = "int",
+                              fault_modes: str | FaultModeRule | None = None,
+                              iterations: int = PL_ITERATIONS) -> FDEResult:
     """Detection and exclusion of ``detect_and_exclude`` as a pure JAX function, arguments as
     ``separation_kernel``. Returns ``FDEResult``; failures as data (EXCLUSION_FAILED,
     INVALID_INPUT with infinite PLs and position), never raised inside the trace."""
@@ -300,9 +308,17 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
     return unpad(fn(*pad_rows(flat, bucket(n)), **static), batch, n)
 
 
-def solution_separation(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                        budget, residual_m, valid=None, *, max_order=None,
-                        all_in_view_weighting="int", fault_modes=None) -> Separation:
+def solution_separation(g: Real[ArrayLike, "*batch L 3"],
+                        constellation: Int[ArrayLike, "*#batch #L"],
+                        var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                        var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                        b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                        p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                        p_const: Real[ArrayLike, "*#batch C"], budget: IntegrityBudget,
+                        residual_m: Real[ArrayLike, "*#batch #L"],
+                        valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
+                        max_order: int | None = None, all_in_view_weighting: str = "int",
+                        fault_modes: str | FaultModeRule | None = None) -> Separation:
     """Solution-separation statistics and detection (seed 004 eqs. 9-13) for measured residuals.
 
     Arguments as ``protection_levels`` plus ``residual_m`` (..., L): y = z - z_hat at the
@@ -315,9 +331,17 @@ def solution_separation(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat
                    fault_modes)
 
 
-def detect_and_exclude(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                       budget, residual_m, valid=None, *, max_order=None,
-                       all_in_view_weighting="int", fault_modes=None) -> FDEResult:
+def detect_and_exclude(g: Real[ArrayLike, "*batch L 3"],
+                       constellation: Int[ArrayLike, "*#batch #L"],
+                       var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                       var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                       b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                       p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                       p_const: Real[ArrayLike, "*#batch C"], budget: IntegrityBudget,
+                       residual_m: Real[ArrayLike, "*#batch #L"],
+                       valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
+                       max_order: int | None = None, all_in_view_weighting: str = "int",
+                       fault_modes: str | FaultModeRule | None = None) -> FDEResult:
     """Detection, then exclusion over the monitored fault modes (module docstring).
 
     Returns ``FDEResult``: ``excluded`` marks the sources removed, ``pl`` the PLs of the solution

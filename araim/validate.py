@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 
-def check_probability(name: str, value) -> float:
+def check_probability(name: str, value: object) -> float:
     """A probability strictly inside (0, 1)."""
     try:
         v = float(value)
@@ -20,7 +20,7 @@ def check_probability(name: str, value) -> float:
     return v
 
 
-def check_positive(name: str, value, allow_zero: bool = False) -> float:
+def check_positive(name: str, value: object, allow_zero: bool = False) -> float:
     """A finite positive number (or non-negative with ``allow_zero``)."""
     try:
         v = float(value)
@@ -33,7 +33,7 @@ def check_positive(name: str, value, allow_zero: bool = False) -> float:
     return v
 
 
-def check_int(name: str, value, minimum: int, maximum: int | None = None) -> int:
+def check_int(name: str, value: object, minimum: int, maximum: int | None = None) -> int:
     """An integer in [minimum, maximum]."""
     try:
         v = int(value)
@@ -47,7 +47,7 @@ def check_int(name: str, value, minimum: int, maximum: int | None = None) -> int
     return v
 
 
-def check_range(name: str, value, lo: float, hi: float) -> float:
+def check_range(name: str, value: object, lo: float, hi: float) -> float:
     """A number in the closed interval [lo, hi]."""
     try:
         v = float(value)

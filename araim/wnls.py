@@ -14,6 +14,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Int, Real
 
 from oaraim.araim.linalg import inverse_variance_weights
 from oaraim.araim.status import Status
@@ -133,8 +135,11 @@ def _wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks, n_iter, tol_m)
 _wnls_jit = jax.jit(_wnls_kernel, static_argnames=("n_clocks", "n_iter"))
 
 
-def wnls_kernel(pseudorange_m, tx_pos_m, sigma_m, x0_m, valid, clock_index, *, n_clocks=1,
-                n_iter=10, tol_m=1e-4) -> WNLSResult:
+def wnls_kernel(pseudorange_m: Float[ArrayLike, "*batch L"],
+                tx_pos_m: Float[ArrayLike, "*#batch L 3"], sigma_m: Float[ArrayLike, "*batch L"],
+                x0_m: Float[ArrayLike, "*batch state"], valid: Bool[ArrayLike, "*batch L"],
+                clock_index: Int[ArrayLike, "*batch L"], *, n_clocks: int = 1,
+                n_iter: int = 10, tol_m: float = 1e-4) -> WNLSResult:
     """The WNLS solution of ``wnls`` as a jitted JAX function of arrays already broadcast to
     one batch shape (no host conversion or checks): callable inside ``jax.jit`` and
     ``jax.vmap``. pseudorange_m, sigma_m, valid, clock_index ``(..., L)``; tx_pos_m
@@ -145,8 +150,12 @@ def wnls_kernel(pseudorange_m, tx_pos_m, sigma_m, x0_m, valid, clock_index, *, n
                      n_clocks=int(n_clocks), n_iter=int(n_iter), tol_m=tol_m)
 
 
-def wnls(pseudorange_m, tx_pos_m, sigma_m, x0_m=None, valid=None, clock_index=None,
-         n_clocks=1, n_iter=10, tol_m=1e-4) -> WNLSResult:
+def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "*#batch L 3"],
+         sigma_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+         x0_m: Real[ArrayLike, "*#batch state"] | None = None,
+         valid: Bool[ArrayLike, "*#batch #L"] | None = None,
+         clock_index: Int[ArrayLike, "*#batch #L"] | Int[ArrayLike, ""] | None = None,
+         n_clocks: int = 1, n_iter: int = 10, tol_m: float = 1e-4) -> WNLSResult:
     """Batched iterated WNLS position and clock solution (seed 001 section 2.4).
 
     Args:

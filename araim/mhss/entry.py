@@ -11,11 +11,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Int, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
+    FaultModeRule,
     check_order,
     fault_mode_rule,
     select_fault_modes,
@@ -41,7 +44,7 @@ from oaraim.araim.mhss.projection import (
     project,
 )
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
-from oaraim.araim.position_opt import check_position_optimization
+from oaraim.araim.position_opt import PositionOptimization, check_position_optimization
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 from oaraim.batching import (
@@ -266,10 +269,12 @@ _kernel_jit = jit_kernel(_kernel, static_argnames=(
     "iterations"))
 
 
-def protection_levels_kernel(sources: Sources, p_const, budget: IntegrityBudget, *, max_order,
-                             all_in_view_weighting="int", fault_modes=None,
-                             position_optimization=None,
-                             iterations=PL_ITERATIONS) -> MHSSResult:
+def protection_levels_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
+                             budget: IntegrityBudget, *, max_order: int,
+                             all_in_view_weighting: str = "int",
+                             fault_modes: str | FaultModeRule | None = None,
+                             position_optimization: PositionOptimization | None = None,
+                             iterations: int = PL_ITERATIONS) -> MHSSResult:
     """The MHSS protection levels as a pure JAX function: callable inside ``jax.jit`` and
     ``jax.vmap`` (there it runs inline in the caller's trace), and jitted on its own when
     called with concrete arrays. The same kernel ``protection_levels`` runs, without the host
@@ -359,9 +364,11 @@ def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, f
     return MHSSResult(*(jnp.moveaxis(x, len(batch), 0) for x in out))
 
 
-def protection_levels_priors_kernel(sources: Sources, p_const, budget: IntegrityBudget, *,
-                                    max_order, all_in_view_weighting="int", fault_modes=None,
-                                    iterations=PL_ITERATIONS) -> MHSSResult:
+def protection_levels_priors_kernel(sources: Sources, p_const: Float[ArrayLike, "P *#batch C"],
+                                    budget: IntegrityBudget, *, max_order: int,
+                                    all_in_view_weighting: str = "int",
+                                    fault_modes: str | FaultModeRule | None = None,
+                                    iterations: int = PL_ITERATIONS) -> MHSSResult:
     """``protection_levels_kernel`` under P sets of prior probabilities over the same
     geometries: ``sources.p_sat`` (P, ..., L) and ``p_const`` (P, ..., C) carry the sets on a
     leading axis, the other fields the batch shape (...). The fault-tolerant solutions
@@ -389,9 +396,18 @@ def protection_levels_priors_kernel(sources: Sources, p_const, budget: Integrity
 
 
 
-def protection_levels(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                      budget, valid=None, *, max_order=None, all_in_view_weighting="int",
-                      threads=None, fault_modes=None, position_optimization=None):
+def protection_levels(g: Real[ArrayLike, "*batch L 3"],
+                      constellation: Int[ArrayLike, "*#batch #L"],
+                      var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                      var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                      b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                      p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
+                      p_const: Real[ArrayLike, "*#batch C"],
+                      budget: IntegrityBudget,
+                      valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
+                      max_order: int | None = None, all_in_view_weighting: str = "int",
+                      threads: int | None = None, fault_modes: str | FaultModeRule | None = None,
+                      position_optimization: PositionOptimization | None = None) -> MHSSResult:
     """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
 
     Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int

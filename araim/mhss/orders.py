@@ -8,9 +8,12 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Float, Int
 
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
+    FaultModeRule,
     event_modes_batch_last,
     fault_mode_rule,
     faulty_constellation_tail,
@@ -26,8 +29,10 @@ MAX_AUTO_ORDER = 3
 
 
 
-def required_order(valid, constellation, p_sat, p_const, budget, cap=MAX_AUTO_ORDER,
-                   fault_modes=None):
+def required_order(valid: Bool[ArrayLike, "*batch L"], constellation: Int[ArrayLike, "*batch L"],
+                   p_sat: Float[ArrayLike, "*batch L"], p_const: Float[ArrayLike, "*batch C"],
+                   budget: IntegrityBudget | float, cap: int = MAX_AUTO_ORDER,
+                   fault_modes: str | FaultModeRule | None = None) -> int:
     """Smallest template order meeting the convention for every geometry of the batch, at most
     ``cap``. ``grouped``: the number of simultaneously faulty constellations r with
     P(more than r) <= P_thresh (``budget`` may then be P_thresh alone); event conventions

@@ -23,10 +23,17 @@ such gradients apart. Bits of the returned int8 (``SWITCH_*``):
 """
 
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Float, Int8
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fault_modes import check_order, fault_mode_rule, select_fault_modes
+from oaraim.araim.fault_modes import (
+    FaultModeRule,
+    check_order,
+    fault_mode_rule,
+    select_fault_modes,
+)
 from oaraim.araim.mhss.entry import batch_last_inputs
 from oaraim.araim.mhss.inputs import Sources, broadcast_batch, check_options
 from oaraim.araim.mhss.projection import project
@@ -122,9 +129,12 @@ _switch_flags_jit = jit_kernel(_switch_flags, static_argnames=(
     "budget", "max_order", "all_in_view_weighting", "rule", "rtol", "band"))
 
 
-def switch_flags_kernel(sources: Sources, p_const, budget: IntegrityBudget, *, max_order,
-                        all_in_view_weighting="int", fault_modes=None, rtol=SWITCH_RTOL,
-                        band=SINGULAR_BAND):
+def switch_flags_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
+                        budget: IntegrityBudget, *, max_order: int,
+                        all_in_view_weighting: str = "int",
+                        fault_modes: str | FaultModeRule | None = None,
+                        rtol: float = SWITCH_RTOL, band: float = SINGULAR_BAND
+                        ) -> Int8[Array, "..."]:
     """(...) int8: the ``SWITCH_*`` bits (module docstring) of each geometry, 0 where its
     derivatives of ``protection_levels_kernel`` (same arguments) are those of a decision set
     that no input within ``rtol`` (relative, probabilities) or ``band`` (pivot test) changes.
