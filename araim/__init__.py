@@ -165,3 +165,16 @@ def __getattr__(name):
 
         return importlib.import_module("oaraim.araim.ekf_replay")
     raise AttributeError(f"module 'oaraim.araim' has no attribute {name!r}")
+
+from oaraim.araim import leo_errors  # noqa: E402
+from oaraim.araim.leo_errors import (  # noqa: E402
+    LEO_CLOCKS,
+    LEO_ISM,
+    LEO_SIGNALS,
+    LeoSignal,
+    leo_labels,
+    leo_variances,
+)
+
+__all__ += ["LEO_CLOCKS", "LEO_ISM", "LEO_SIGNALS", "LeoSignal", "leo_errors", "leo_labels",
+            "leo_variances"]
