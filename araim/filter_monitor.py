@@ -282,8 +282,9 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
                     iterations: int = PL_ITERATIONS):
     """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); inputs as
     ``araim.ekf.run_ekf`` (``gyro``, ``accel`` (E, n, 3); ``z``, ``valid``, ``tx_clk_m`` (E, L);
-    ``tx_pos`` (L, 3)) plus the towers' operator labels ``constellation`` (L,), their priors
-    ``p_sat`` (L,) or (E, L) and ``p_const`` (C,). Every filter starts from ``state0``. Returns
+    ``tx_pos`` (L, 3); ``sigma_m`` scalar, (L,) or (E, L)) plus the towers' operator labels
+    ``constellation`` (L,), their priors ``p_sat`` (L,) or (E, L) and ``p_const`` (C,). Every
+    filter starts from ``state0``. Returns
     (final bank states, ``FilterMonitorEpoch`` stacked over epochs); the position is ENU in
     the filter's frame G."""
     rule = fault_mode_rule(fault_modes)
@@ -293,14 +294,15 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
     p_sat = jnp.broadcast_to(jnp.asarray(p_sat, jnp.float64), (E, L))
     constellation = jnp.asarray(constellation)
     p_const = jnp.asarray(p_const, jnp.float64)
+    sigma = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64), (E, L))
     bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), state0)
 
     def body(bank, inp):
-        g, a, zz, vv, tc, ps_e = inp
+        g, a, zz, vv, tc, ps_e, sg = inp
         fm, used = epoch_modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
-        bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sigma_m, params)
+        bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sg, params)
         out = separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, budget, iterations)
         return bank, out
 
     return jax.lax.scan(body, bank0, (gyro, accel, z, jnp.asarray(valid, bool), tx_clk_m,
-                                      p_sat))
+                                      p_sat, sigma))
