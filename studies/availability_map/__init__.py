@@ -48,6 +48,7 @@ from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_varia
 from oaraim.batching import jit_kernel, map_tiles, materialize
 from oaraim.geometry import GALILEO, GPS, azimuth, elevation, line_of_sight
 from oaraim.mc import Values
+from oaraim.studies.availability_map import leo as leo_option
 from oaraim.studies.availability_map.coastlines import parse_coastlines
 from oaraim.studies.availability_map.compare import coverage_table, pl_difference, point_maps
 from oaraim.studies.availability_map.inputs import (
@@ -175,7 +176,8 @@ def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mas
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
-    towers), through the MHSS kernel and the service level's criteria."""
+    towers), plus the row's LEO slots at that epoch (``towers["leo"]``: ``leo.leo_slots``),
+    through the MHSS kernel and the service level's criteria."""
     n_t = sat_ecef.shape[0]
     n_lon = lons_rad.shape[0]
     lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
@@ -221,6 +223,11 @@ def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mas
         x = {k: jnp.concatenate([x[k], s[k]], -1) for k in x}
         g = jnp.concatenate([g, geometry.geometry_rows(s_az, jnp.where(s_valid, s_el, 0.0))],
                             -2)
+    if towers is not None and "leo" in towers:
+        s = {k: v[lon_i, t_i] for k, v in towers["leo"].items()}
+        s = dict(s, b_nom=jnp.zeros(s["az"].shape), constellation=s["label"])
+        x = {k: jnp.concatenate([x[k], s[k]], -1) for k in x}
+        g = jnp.concatenate([g, geometry.geometry_rows(s["az"], s["el"])], -2)
     r = protection_levels_kernel(Sources(g, x["constellation"], x["var_int"], x["var_acc"],
                                          x["b_nom"], x["p_sat"], x["valid"]), p_const, budget,
                                  max_order=max_order, fault_modes=fault_mode_rule(fault_modes),
@@ -244,8 +251,10 @@ GNSS_ONLY_OUTPUTS = ("hpl_m", "vpl_m", "status", "available")
 
 
 def gnss_only_outputs(params):
-    """Whether a run stores the GNSS-only map too: it has SOPs and ``sop_difference=yes``."""
-    return bool(layout(params)["n_sops"]) and params["sop_difference"] == "yes"
+    """Whether a run stores the GNSS-only map too: it has SOPs (towers or LEO satellites) and
+    ``sop_difference=yes``."""
+    lay = layout(params)
+    return bool(lay["n_sops"] or lay["n_leo"]) and params["sop_difference"] == "yes"
 
 
 class MapRow:
@@ -281,13 +290,16 @@ class MapRow:
                                                   p["height_m"])
             self.towers = {"az": jnp.asarray(az), "el": jnp.asarray(el),
                            "valid": jnp.asarray(valid), "label": jnp.asarray(label)}
+        if lay["n_leo"]:  # the LEO slots travel with the row's tower slots
+            self.towers = {**(self.towers or {}),
+                           "leo": leo_option.leo_slots(p, float(lat_deg), lay["n_leo"])}
 
         # the GNSS-only map beside a map with SOPs (sop_difference): the same kernel with the
         # layout of the same parameters without towers, so its values are those of a run
         # without SOPs
         self.gnss_only = None
-        if lay["n_sops"] and p["sop_difference"] == "yes":
-            g = layout({**p, "sops_per_km2": 0.0, "towers": "none"})
+        if (lay["n_sops"] or lay["n_leo"]) and p["sop_difference"] == "yes":
+            g = layout({**p, "sops_per_km2": 0.0, "towers": "none", "leo": "none"})
             self.gnss_only = (dict(self.static, n_sops=0, bpp=True, max_order=g["max_order"]),
                               jnp.asarray(g["p_const"]))
 
@@ -329,11 +341,18 @@ def _layout(key):
         n_sops, bpp = bpp_count(p), True
         n_carriers = 1 if n_sops else 0
     p_const = [p["p_const_gps"], p["p_const_gal"]] + [p["p_const_sop"]] * n_carriers
+    n_leo = 0 if p["leo"] == "none" else min(p["leo_max"], leo_option.most_in_view(
+        p["leo"], p["duration_s"], p["step_s"], p["leo_mask_deg"], p["lat_deg"], p["lon_deg"],
+        p["height_m"]))
+    leo_groups = leo_option.leo_groups(p, n_leo)
+    p_const += [p["p_const_leo"]] * leo_groups
     # the order the P_thresh rule needs in the worst case: every slot in view, every source
     # at the larger per-satellite prior (the kernel still picks each geometry's own order)
-    L = n_slots + n_sops
+    L = n_slots + n_sops + n_leo
     labels = [GPS] * ((n_slots + 1) // 2) + [GALILEO] * (n_slots // 2) + [2] * n_sops
+    labels += leo_option.layout_labels(p, n_leo)
     p_sat = [max(p["p_sat_gps"], p["p_sat_gal"])] * n_slots + [p["p_s_sop"]] * n_sops
+    p_sat += [p["p_s_leo"]] * n_leo
     max_order = int(required_order(
         jnp.ones((1, L), bool), jnp.asarray([labels]), jnp.asarray([p_sat]),
         jnp.asarray([p_const]), level.budget, cap=2, fault_modes=p["fault_modes"]))
@@ -342,7 +361,7 @@ def _layout(key):
             "position_optimization": position_optimization(p["position_opt"], p["preset"],
                                                            req),
             "n_sops": n_sops, "bpp": bpp, "p_const": np.asarray(p_const), "max_order": max_order,
-            "n_carriers": n_carriers}
+            "n_carriers": n_carriers, "n_leo": n_leo}
 
 
 def layout(params):
@@ -470,6 +489,7 @@ class AvailabilityMap(SweepStudy):
         "sop_difference": _p("yes", parse_choice("yes", "no"), "with SOPs: also compute the "
                              "GNSS-only map and draw the difference maps (with minus without "
                              "SOPs) and the coverage table (availability_difference.png)"),
+        **leo_option.LEO_PARAMS,
         "fault_modes": fault_modes_param("add-v4.2", "the current ADD (MAAST 2024 "
                                          "determine_subsets_v5)"),
         "chunk": _p(16384, count(1024), "realizations per task and chunk file (not a result)"),
@@ -484,6 +504,9 @@ class AvailabilityMap(SweepStudy):
                              "constellation")
         if p["towers"] != "none" and p["sops_per_km2"] > 0:
             raise ValueError("give either towers=CSV or sops_per_km2 > 0, not both")
+        if p["leo"] != "none" and (p["towers"] != "none" or p["sops_per_km2"] > 0):
+            raise ValueError("give either leo=... or towers (towers=CSV, sops_per_km2 > 0), "
+                             "not both: the map compares GNSS with one kind of SOP at a time")
         n_t = len(np.arange(0.0, p["duration_s"] - 1e-9, p["step_s"]))
         if len(p["lon_deg"]) * n_t >= 2**31:
             raise ValueError("lon_deg x epochs per latitude must stay below 2^31; use fewer "
@@ -563,6 +586,7 @@ class AvailabilityMap(SweepStudy):
             "grid_points": int(lats.size * lons.size), "epochs": int(t.size),
             "protection_levels": int(lats.size * lons.size * t.size),
             "gnss_slots": lay["n_slots"], "sop_slots": lay["n_sops"],
+            "leo_slots": lay["n_leo"],
             "mhss_max_order": lay["max_order"],
             "fault_modes": params["fault_modes"],
             "position_opt": params["position_opt"],
@@ -635,6 +659,8 @@ class AvailabilityMap(SweepStudy):
 
 def sop_description(p):
     """The SOPs of a run in words, for the difference figure and the summary."""
+    if p["leo"] != "none":
+        return leo_option.leo_description(p, layout(p)["n_leo"])
     if p["towers"] != "none":
         return f"towers of {Path(p['towers']).name} within {p['d_min_m']:g}-{p['d_max_m']:g} m"
     return (f"BPP {p['sops_per_km2']:g} towers/km^2 ({bpp_count(p)} per user), "
