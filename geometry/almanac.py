@@ -17,6 +17,7 @@ files of GPS usually write the week modulo 1024; they are taken literally unless
 literal.
 """
 
+import os
 import re
 from pathlib import Path
 from typing import NamedTuple
@@ -190,7 +191,8 @@ def _yuma_key(label):
     return None
 
 
-def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
+def read_yuma(path: str | os.PathLike, system: str = "G",
+              week_reference_t_gps_s: float | None = None) -> Almanac:
     """Read a YUMA almanac. ``system``: 'G' (GPS) or 'E' (Galileo, e.g. MAAST's ED-259 file).
 
     The satellite number is taken from the block header ('PRN-01', 'SVID- 1') when present,
@@ -256,7 +258,8 @@ def read_yuma(path, system="G", week_reference_t_gps_s=None) -> Almanac:
                    GPS if system == "G" else GALILEO, p.name)
 
 
-def read_sem(path, system="G", week_reference_t_gps_s=None) -> Almanac:
+def read_sem(path: str | os.PathLike, system: str = "G",
+             week_reference_t_gps_s: float | None = None) -> Almanac:
     """Read a SEM almanac (NAVCEN ``.al3``): angles in semicircles, inclination as delta_i
     from 0.30 semicircles (GPS). Layout: count and title; week and t_oa; then per satellite
     PRN, SVN, URA, (e, delta_i, Omega-dot), (sqrt A, Omega_0, omega), (M_0, a_f0, a_f1),

@@ -10,6 +10,8 @@ leading axes broadcast, the last axis of a position is its 3 coordinates.
 
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Array, Float, Real
 
 from oaraim.constants import (
     FREE_AIR_GRADIENT_PER_S2,
@@ -29,7 +31,9 @@ from oaraim.constants import (
 _BOWRING_ITERATIONS = 3
 
 
-def geodetic_to_ecef(lat_rad, lon_rad, h_m):
+def geodetic_to_ecef(lat_rad: Real[ArrayLike, "..."], lon_rad: Real[ArrayLike, "..."],
+                     h_m: Real[ArrayLike, "..."]
+                     ) -> Float[Array, "... 3"]:
     """ECEF position of a geodetic point (WGS-84), shape ``(..., 3)``.
 
     x = (N + h) cos(lat) cos(lon), y = (N + h) cos(lat) sin(lon), z = (N (1 - e^2) + h) sin(lat)
@@ -44,7 +48,9 @@ def geodetic_to_ecef(lat_rad, lon_rad, h_m):
                       (n * (1.0 - WGS84_E2) + h_m) * s], axis=-1)
 
 
-def ecef_to_geodetic(ecef_m):
+def ecef_to_geodetic(ecef_m: Real[ArrayLike, "*batch 3"]
+                     ) -> tuple[Float[Array, "*batch"], Float[Array, "*batch"],
+                                Float[Array, "*batch"]]:
     """Geodetic latitude, longitude (radians) and ellipsoidal height (metres) of ECEF points.
 
     Bowring's method with a fixed iteration count (no data-dependent loop, so it jits and vmaps):
@@ -73,7 +79,8 @@ def ecef_to_geodetic(ecef_m):
     return lat, lon, h
 
 
-def enu_rotation(lat_rad, lon_rad):
+def enu_rotation(lat_rad: Real[ArrayLike, "..."], lon_rad: Real[ArrayLike, "..."]
+                 ) -> Float[Array, "... 3 3"]:
     """Rotation from ECEF to the local East-North-Up frame at (lat, lon), shape ``(..., 3, 3)``.
 
     Rows are the unit vectors east, north and up (the ellipsoid normal) in ECEF, so
@@ -90,7 +97,8 @@ def enu_rotation(lat_rad, lon_rad):
     return jnp.stack([east, north, up], -2)
 
 
-def ecef_to_enu(ecef_m, origin_ecef_m):
+def ecef_to_enu(ecef_m: Real[ArrayLike, "... 3"], origin_ecef_m: Real[ArrayLike, "... 3"]
+                ) -> Float[Array, "... 3"]:
     """ENU coordinates (metres) of ECEF points relative to an origin, using the origin's
     geodetic latitude and longitude. ``ecef_m`` ``(..., 3)`` broadcasts against the origin."""
     origin_ecef_m = jnp.asarray(origin_ecef_m, jnp.float64)
@@ -99,7 +107,8 @@ def ecef_to_enu(ecef_m, origin_ecef_m):
     return jnp.einsum("...ij,...j->...i", enu_rotation(lat, lon), d)
 
 
-def enu_to_ecef(enu_m, origin_ecef_m):
+def enu_to_ecef(enu_m: Real[ArrayLike, "... 3"], origin_ecef_m: Real[ArrayLike, "... 3"]
+                ) -> Float[Array, "... 3"]:
     """Inverse of ``ecef_to_enu``: ECEF of points given in the origin's ENU frame."""
     origin_ecef_m = jnp.asarray(origin_ecef_m, jnp.float64)
     lat, lon, _ = ecef_to_geodetic(origin_ecef_m)
@@ -107,7 +116,10 @@ def enu_to_ecef(enu_m, origin_ecef_m):
     return origin_ecef_m + jnp.einsum("...ji,...j->...i", r, jnp.asarray(enu_m, jnp.float64))
 
 
-def azimuth_elevation(receiver_ecef_m, transmitter_ecef_m):
+def azimuth_elevation(receiver_ecef_m: Real[ArrayLike, "... 3"],
+                      transmitter_ecef_m: Real[ArrayLike, "... 3"]
+                      ) -> tuple[Float[Array, "..."], Float[Array, "..."],
+                                 Float[Array, "..."]]:
     """Azimuth, elevation and range of transmitters seen from receivers.
 
     Args:
@@ -127,7 +139,9 @@ def azimuth_elevation(receiver_ecef_m, transmitter_ecef_m):
     return az_el_from_rotation(r, d)
 
 
-def az_el_from_rotation(r, d):
+def az_el_from_rotation(r: Real[ArrayLike, "... 3 3"], d: Real[ArrayLike, "... 3"]
+                        ) -> tuple[Float[Array, "..."], Float[Array, "..."],
+                                 Float[Array, "..."]]:
     """Azimuth (rad, clockwise from north, [0, 2 pi)), elevation (rad) and range (m) of
     line-of-sight vectors ``d`` (..., 3, ECEF metres) given the ECEF -> ENU rotation ``r``
     (..., 3, 3) of ``enu_rotation``: for callers that already hold the rotation of the receiver
@@ -141,7 +155,9 @@ def az_el_from_rotation(r, d):
     return az, el, jnp.hypot(horiz, u)
 
 
-def earth_rotation_correction(sat_ecef_m, travel_time_s):
+def earth_rotation_correction(sat_ecef_m: Real[ArrayLike, "... 3"],
+                              travel_time_s: Real[ArrayLike, "..."]
+                              ) -> Float[Array, "... 3"]:
     """Sagnac correction: a satellite position in the ECEF frame of the *reception* time.
 
     The ECEF frame rotates by Omega_e tau while the signal travels for tau seconds; the
@@ -156,7 +172,8 @@ def earth_rotation_correction(sat_ecef_m, travel_time_s):
     return jnp.stack([c * x + s * y, -s * x + c * y, z], -1)
 
 
-def normal_gravity_mps2(lat_rad, h_m=0.0):
+def normal_gravity_mps2(lat_rad: Real[ArrayLike, "..."], h_m: Real[ArrayLike, "..."] = 0.0
+                        ) -> float | Float[np.ndarray, "..."]:
     """Magnitude of WGS-84 normal gravity at geodetic latitude ``lat_rad`` and a small height
     ``h_m`` above the ellipsoid, m/s^2: Somigliana's closed formula on the ellipsoid (NIMA
     TR8350.2 eq. 4-1) minus the free-air gradient times the height (the first-order term of

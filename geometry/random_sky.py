@@ -1,12 +1,17 @@
 """Random geometries of seed 001 section 3.3: a uniform random sky and BPP cellular towers."""
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Float, PRNGKeyArray, Real
 
 
-def random_sky(key, n_sats, mask_rad, batch_shape=()):
+def random_sky(key: PRNGKeyArray, n_sats: int, mask_rad: Real[ArrayLike, ""],
+               batch_shape: Sequence[int] = ()
+               ) -> tuple[Float[Array, "*batch N"], Float[Array, "*batch N"]]:
     """Random satellite sky of seed 001 section 3.3.
 
     az ~ U(0, 2 pi), el ~ U(mask, pi/2), independently per satellite. The paper notes this is not
@@ -39,7 +44,9 @@ class Towers(NamedTuple):
     enu_m: jax.Array  # (..., N, 3) [d sin az, d cos az, h]
 
 
-def bpp_towers(key, n_towers, d_min_m, d_max_m, h_min_m=0.0, h_max_m=0.0, batch_shape=()):
+def bpp_towers(key: PRNGKeyArray, n_towers: int, d_min_m: Real[ArrayLike, ""],
+               d_max_m: Real[ArrayLike, ""], h_min_m: Real[ArrayLike, ""] = 0.0,
+               h_max_m: Real[ArrayLike, ""] = 0.0, batch_shape: Sequence[int] = ()) -> Towers:
     """Binomial point process of N towers in the annulus B_o(d_min, d_max), seed 001 section 3.3.
 
     Each tower is uniform in *area* over the annulus (so d^2 is uniform on

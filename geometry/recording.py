@@ -111,12 +111,16 @@ import dataclasses
 import gzip
 import io
 import json
+import os
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
+from jax.typing import ArrayLike
+from jaxtyping import Float, Real
 
 from oaraim.geometry import frames
 from oaraim.geometry.recording_checks import (  # noqa: F401  (re-exported)
@@ -243,7 +247,7 @@ def _read(path: Path, name: str) -> pd.DataFrame:
                              f"with pandas to_parquet / to_csv", file=str(path)) from None
 
 
-def load_recording(path) -> Recording:
+def load_recording(path: str | os.PathLike) -> Recording:
     """Load and validate the recording in folder ``path`` (or the folder of ``path`` when it
     names meta.json). Raises :class:`RecordingError` naming file, column and row."""
     folder = Path(path).expanduser()
@@ -275,7 +279,8 @@ def load_recording(path) -> Recording:
     return _validate(meta, tables, wheres.__getitem__)
 
 
-def write_recording(path, recording: Recording, format: str = "parquet",  # noqa: A002
+def write_recording(path: str | os.PathLike, recording: Recording,
+                    format: str = "parquet",  # noqa: A002
                     overwrite: bool = False) -> Path:
     """Validate ``recording`` and write it to folder ``path`` (created) as meta.json plus one
     ``NAME.parquet`` or ``NAME.csv`` per present table. Refuses to write an invalid recording
@@ -374,8 +379,9 @@ def _pivot(df: pd.DataFrame, key: str, ids, value, t_s) -> EpochMatrix:
     return EpochMatrix(t, out[..., 0] if single else out, valid, ids)
 
 
-def pseudorange_matrix(recording: Recording, tx_ids=None, value="pseudorange_m",
-                       t_s=None) -> EpochMatrix:
+def pseudorange_matrix(recording: Recording, tx_ids: Sequence[str] | None = None,
+                       value: str | Sequence[str] = "pseudorange_m",
+                       t_s: Real[ArrayLike, " T"] | None = None) -> EpochMatrix:
     """Terrestrial pseudoranges as ``(t_s (T,), values (T, L), valid (T, L), ids (L,))``.
 
     Epochs are the sorted unique ``t_s`` of the table (or the strictly increasing grid ``t_s``
@@ -391,8 +397,9 @@ def pseudorange_matrix(recording: Recording, tx_ids=None, value="pseudorange_m",
     return _pivot(recording.pseudoranges, "tx_id", tx_ids, value, t_s)
 
 
-def gnss_matrix(recording: Recording, sv_ids=None, value="pseudorange_m",
-                t_s=None) -> EpochMatrix:
+def gnss_matrix(recording: Recording, sv_ids: Sequence[str] | None = None,
+                value: str | Sequence[str] = "pseudorange_m",
+                t_s: Real[ArrayLike, " T"] | None = None) -> EpochMatrix:
     """GNSS rows pivoted like :func:`pseudorange_matrix`; columns default to the sorted unique
     sv_id (``"E11" < "G05"``). ``value=["sat_x_m", "sat_y_m", "sat_z_m"]`` gives positions."""
     if recording.gnss is None:
@@ -423,7 +430,8 @@ def _tx_rows(recording: Recording, tx_ids) -> pd.DataFrame:
     return tx.iloc[idx]
 
 
-def tower_clock_m(recording: Recording, t_s, tx_ids=None) -> np.ndarray:
+def tower_clock_m(recording: Recording, t_s: Real[ArrayLike, "*t"],
+                  tx_ids: Sequence[str] | None = None) -> Float[np.ndarray, "*t L"]:
     """Transmitter clocks c dt_s(t) = clock_bias_m + clock_drift_mps (t_s - clock_t0_s) (seed 000
     eq. 3), shape ``t_s.shape + (L,)``, columns in ``tx_ids`` (default: table) order."""
     tx = _tx_rows(recording, tx_ids)

@@ -1,9 +1,12 @@
 """Line-of-sight rows of the measurement Jacobian (seed 001 section 2.4)."""
 
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Float, Real
 
 
-def geometry_rows(az_rad, el_rad):
+def geometry_rows(az_rad: Real[ArrayLike, "..."], el_rad: Real[ArrayLike, "..."]
+                  ) -> Float[Array, "... 3"]:
     """Position part of the pseudorange Jacobian rows, seed 001 section 2.4.
 
     Row of transmitter l in the receiver's local East, North, Up frame:
@@ -25,7 +28,9 @@ def geometry_rows(az_rad, el_rad):
     )
 
 
-def geometry_rows_enu(tx_enu_m, rx_enu_m=None):
+def geometry_rows_enu(tx_enu_m: Real[ArrayLike, "*#batch L 3"],
+                      rx_enu_m: Real[ArrayLike, "*#batch 3"] | None = None
+                      ) -> Float[Array, "*batch L 3"]:
     """The same rows from transmitter positions in a local ENU frame.
 
     Args:

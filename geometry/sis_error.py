@@ -33,11 +33,18 @@ components R, A, C and the 3D error keep it too. The satellite-to-satellite spre
 offset (GPS blocks differ by ~0.8 m) stays in both.
 """
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Real
 
 from oaraim.constants import C_M_S, OMEGA_E_GNSS_RAD_S, SISRE_WEIGHTS
+from oaraim.geometry.beidou_nav import BeidouEphemeris
+from oaraim.geometry.ephemeris import Ephemeris
+from oaraim.geometry.rinex_clk import PreciseClocks
+from oaraim.geometry.sp3 import PreciseOrbits
 
 
 class SISError(NamedTuple):
@@ -141,8 +148,11 @@ def sis_errors(sats, broadcast_ecef_m, broadcast_vel_m_s, broadcast_clock_s, pre
                     sisre_clock, sisre_orbit, datum, r_mean, ok, sats)
 
 
-def compare_broadcast_precise(ephemeris, orbits, clocks=None, t_gps_s=None,
-                              systems=("G", "E"), weights=None, prns=None) -> SISError:
+def compare_broadcast_precise(ephemeris: Ephemeris | BeidouEphemeris, orbits: PreciseOrbits,
+                              clocks: PreciseClocks | None = None,
+                              t_gps_s: Real[ArrayLike, " T"] | None = None,
+                              systems: Sequence[str] = ("G", "E"), weights: dict | None = None,
+                              prns: Sequence[str] | None = None) -> SISError:
     """``sis_errors`` of a broadcast ``geometry.Ephemeris`` against precise ``orbits``
     (``geometry.read_sp3``) and ``clocks`` (``geometry.rinex_clk.read_clock_rinex``; None uses
     the SP3 clocks; either way the periodic relativistic term -2 r.v / c^2 is added to them, as

@@ -15,12 +15,15 @@ Positions are in the ECEF frame at the epoch t (geometry: the Sagnac rotation du
 ~70 ms signal flight moves a direction by ~1.4 arcsec and is left out).
 """
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Array, Bool, Float, Real, Shaped
 
 from oaraim.geometry.almanac import Almanac, read_sem, read_yuma
 from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
@@ -54,6 +57,10 @@ class Sky(NamedTuple):
     """What the satellites came from: the ``repr`` of each orbit object, joined by "; "."""
 
 
+#: what ``sky``, ``satellites`` and ``resolve_source`` take as the satellites' source
+_SkySource = str | Path | Ephemeris | Almanac | Sequence[Ephemeris | Almanac]
+
+
 def _load_file(path: Path, constellations):
     name = path.name.lower()
     if name.endswith((".al3", ".sem")):
@@ -69,7 +76,8 @@ def _looks_yuma(path: Path) -> bool:
         return f.read(200).lstrip().startswith("****")
 
 
-def resolve_source(source, constellations=("gps", "galileo")):
+def resolve_source(source: _SkySource, constellations: Sequence[str] = ("gps", "galileo")
+                   ) -> tuple[list[Ephemeris | Almanac], set[int], str]:
     """The orbit objects of a ``source`` (see the module docstring) and a description."""
     bad = [c for c in constellations if c not in CONSTELLATION_CODES]
     if bad or not constellations:
@@ -101,9 +109,14 @@ def resolve_source(source, constellations=("gps", "galileo")):
     return objs, codes, desc
 
 
-def satellites(source, t_gps_s, constellations=("gps", "galileo")):
-    """ECEF positions ``(T, S, 3)``, usable mask ``(T, S)`` and the satellite labels of a source,
-    restricted to the requested constellations."""
+def satellites(source: _SkySource, t_gps_s: Real[ArrayLike, " T"] | Real[ArrayLike, ""],
+               constellations: Sequence[str] = ("gps", "galileo")
+               ) -> tuple[Float[Array, "T S 3"], Bool[Array, "T S"], Shaped[np.ndarray, " S"],
+                          Shaped[np.ndarray, " S"], Shaped[np.ndarray, " S"], str]:
+    """The satellites of a source restricted to the requested constellations at GPS times
+    ``t_gps_s`` ((T,) or a scalar, taken as (1,)): ``(ecef_m, usable, prn, constellation, sv,
+    description)``, ECEF positions ``(T, S, 3)`` (metres), usable mask ``(T, S)``, satellite
+    numbers, constellation codes and names ``(S,)``, and what the satellites came from."""
     objs, codes, desc = resolve_source(source, constellations)
     t = np.atleast_1d(np.asarray(t_gps_s, np.float64))
     ecef, valid, prn, cons, sv = [], [], [], [], []
@@ -131,7 +144,8 @@ def satellites(source, t_gps_s, constellations=("gps", "galileo")):
 GAP_SHARE = 0.5
 
 
-def ephemeris_gaps(usable, constellation):
+def ephemeris_gaps(usable: Bool[ArrayLike, "T S"], constellation: Shaped[ArrayLike, " S"]
+                   ) -> Bool[np.ndarray, " T"]:
     """(T,) bool: the epochs at which some constellation of a source has usable orbits for
     fewer than ``GAP_SHARE`` of the most satellites it has at any of the epochs, or for none
     (a navigation file that ends early or starts late: its satellites vanish without a
@@ -146,7 +160,9 @@ def ephemeris_gaps(usable, constellation):
     return gaps
 
 
-def line_of_sight(receiver_ecef_m, sat_ecef_m):
+def line_of_sight(receiver_ecef_m: Real[ArrayLike, "*rx 3"], sat_ecef_m: Real[ArrayLike, "T S 3"]
+                  ) -> tuple[Float[Array, "*rx T S"], Float[Array, "*rx T S"],
+                             Float[Array, "*rx T S"]]:
     """East, north and up components (m) of the lines of sight from receivers ``(..., 3)`` to
     satellites ``(T, S, 3)`` (ECEF, metres): three arrays ``(..., T, S)``."""
     rx = jnp.asarray(receiver_ecef_m, jnp.float64)
@@ -158,18 +174,23 @@ def line_of_sight(receiver_ecef_m, sat_ecef_m):
     return proj[..., 0], proj[..., 1], proj[..., 2]
 
 
-def azimuth(east_m, north_m):
+def azimuth(east_m: Real[ArrayLike, "..."], north_m: Real[ArrayLike, "..."]
+            ) -> Float[Array, "..."]:
     """Azimuth (rad, [0, 2 pi), clockwise from north) of a line of sight."""
     return jnp.mod(jnp.arctan2(east_m, north_m), 2.0 * jnp.pi)
 
 
-def elevation(east_m, north_m, up_m):
+def elevation(east_m: Real[ArrayLike, "..."], north_m: Real[ArrayLike, "..."],
+              up_m: Real[ArrayLike, "..."]) -> Float[Array, "..."]:
     """Elevation (rad) of a line of sight."""
     return jnp.arctan2(up_m, jnp.hypot(east_m, north_m))
 
 
 @jax.jit
-def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
+def look_angles(receiver_ecef_m: Real[ArrayLike, "*rx 3"], sat_ecef_m: Real[ArrayLike, "T S 3"],
+                sat_valid: Bool[ArrayLike, "*#rx #T #S"], mask_rad: Real[ArrayLike, ""]
+                ) -> tuple[Float[Array, "*rx T S"], Float[Array, "*rx T S"],
+                           Float[Array, "*rx T S"], Bool[Array, "*rx T S"]]:
     """Az, el, range and validity of satellites ``(T, S, 3)`` from receivers ``(..., 3)``.
 
     Returns arrays ``(..., T, S)``; entries of unusable satellites hold az = el = range = 0.
@@ -185,8 +206,9 @@ def look_angles(receiver_ecef_m, sat_ecef_m, sat_valid, mask_rad):
             jnp.where(usable, rng, zero), valid)
 
 
-def sky(receiver_ecef_m, t_gps_s, source="nominal", mask_deg=5.0,
-        constellations=("gps", "galileo")) -> Sky:
+def sky(receiver_ecef_m: Real[ArrayLike, "*rx 3"],
+        t_gps_s: Real[ArrayLike, " T"] | Real[ArrayLike, ""], source: _SkySource = "nominal",
+        mask_deg: float = 5.0, constellations: Sequence[str] = ("gps", "galileo")) -> Sky:
     """Azimuth/elevation of every satellite of ``source`` at GPS times ``t_gps_s`` (T,), seen
     from receivers ``receiver_ecef_m`` ``(..., 3)`` (metres, WGS-84 ECEF).
 

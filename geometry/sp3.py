@@ -11,6 +11,7 @@ Only files in GPS time (``%c`` time system 'GPS', the IGS convention) are accept
 the time scale of ``t_gps_s``; a UTC file would need the leap-second count.
 """
 
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -42,7 +43,7 @@ class PreciseOrbits(NamedTuple):
     """The file's time system from its ``%c`` line: ``"GPS"`` (or ``"ccc"``, read as GPS)."""
 
 
-def read_sp3(path) -> PreciseOrbits:
+def read_sp3(path: str | os.PathLike) -> PreciseOrbits:
     """Read an SP3-c or SP3-d file (plain text or .gz) into arrays."""
     import gzip
 

@@ -12,13 +12,19 @@ one position and clock; separate sites are hundreds of metres apart) and far abo
 rounding of a written position (1e-9 deg is 0.1 mm).
 """
 
+from collections.abc import Sequence
+
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Real, Shaped
 
 #: the smallest distance (m) between two transmitters of one clock group
 MIN_SEPARATION_M = 1.0
 
 
-def first_near_pair(xyz_m, group, min_m=MIN_SEPARATION_M):
+def first_near_pair(xyz_m: Real[ArrayLike, "n 3"],
+                    group: Shaped[ArrayLike, " n"] | Sequence[str | int],
+                    min_m: float = MIN_SEPARATION_M) -> tuple[int, int, float] | None:
     """The first pair of rows (in row order: the smallest later row, then the smallest
     earlier one) of one ``group`` whose positions ``xyz_m`` ((n, 3) metres, e.g. ECEF) lie
     closer than ``min_m``: ``(earlier, later, distance_m)``, or None."""
