@@ -83,7 +83,7 @@ BUDGET_LPV200_MAAST = IntegrityBudget(
 def exposure_probability(p_instantaneous: Real[ArrayLike, "..."],
                          exposure_s: Real[ArrayLike, "..."],
                          mean_fault_duration_s: Real[ArrayLike, "..."]
-                         ) -> Float[np.ndarray, "..."]:
+                         ) -> Float[np.ndarray, "..."] | float:
     """The prior of a fault over an exposure window, ADD v4.2 (MAAST 2024: ``p (1 + tau)``,
     tau = T_exp / MFD): P (1 + T_exp / MFD), the probability that a fault with instantaneous
     probability P and mean duration MFD is present at some time within T_exp. Pass the result

@@ -42,10 +42,13 @@ a zero innovation and unit R, so it adds nothing to K, S^-1 nu or the NIS (teste
 Everything is pure JAX (float64), jit- and vmap-friendly; ``run_ekf`` is a ``lax.scan``.
 """
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Bool, Float, Real
 
 from oaraim.constants import C_M_S
 from oaraim.geometry.clocks import S_WDT_OCXO_S, S_WDTDOT_OCXO_PER_S, clock_transition
@@ -368,7 +371,8 @@ def transition_and_noise(w_hat, ct, ct_askew, params: EkfParams, t_s):
     return phi, 0.5 * (qd + qd.T)
 
 
-def ekf_predict(state: EkfState, gyro, accel, params: EkfParams):
+def ekf_predict(state: EkfState, gyro: Float[ArrayLike, "n 3"], accel: Float[ArrayLike, "n 3"],
+                params: EkfParams) -> tuple[EkfState, Float[Array, "17 17"]]:
     """Propagate over one measurement interval of n IMU samples (``gyro``, ``accel``: (n, 3)).
 
     Mechanization at the IMU rate (``_mechanize_interval``), then P <- Phi P Phi^T + Q_d with
@@ -505,21 +509,33 @@ def kalman_update(state: EkfState, nu, u, r_var, used, s_inv=None):
     return inject(state, dx, p), info
 
 
-def ekf_update(state: EkfState, z, used, tx_pos, tx_clk_m, sigma_m):
+def ekf_update(state: EkfState, z: Float[ArrayLike, " L"], used: Bool[ArrayLike, " L"],
+               tx_pos: Float[ArrayLike, "L 3"], tx_clk_m: Float[ArrayLike, " L"],
+               sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""]
+               ) -> tuple[EkfState, UpdateInfo]:
     """Pseudorange update (seed 000 section II-E). ``sigma_m`` scalar or (L,)."""
     z_hat, u = pseudorange_model(state.r, state.clk, tx_pos, tx_clk_m)
     r_var = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64) ** 2, z_hat.shape)
     return kalman_update(state, z - z_hat, u, r_var, used)
 
 
-def ekf_step(state: EkfState, gyro, accel, z, used, tx_pos, tx_clk_m, sigma_m,
-             params: EkfParams):
+def ekf_step(state: EkfState, gyro: Float[ArrayLike, "n 3"], accel: Float[ArrayLike, "n 3"],
+             z: Float[ArrayLike, " L"], used: Bool[ArrayLike, " L"],
+             tx_pos: Float[ArrayLike, "L 3"], tx_clk_m: Float[ArrayLike, " L"],
+             sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""], params: EkfParams
+             ) -> tuple[EkfState, UpdateInfo]:
     """Predict over one interval of IMU samples, then update with that epoch's pseudoranges."""
     state, _ = ekf_predict(state, gyro, accel, params)
     return ekf_update(state, z, used, tx_pos, tx_clk_m, sigma_m)
 
 
-def ekf_init(q, r, v, bg, ba, clk, P) -> EkfState:
+def ekf_init(q: Real[ArrayLike, "4"] | Sequence[float],
+             r: Real[ArrayLike, "3"] | Sequence[float],
+             v: Real[ArrayLike, "3"] | Sequence[float],
+             bg: Real[ArrayLike, "3"] | Sequence[float],
+             ba: Real[ArrayLike, "3"] | Sequence[float],
+             clk: Real[ArrayLike, "2"] | Sequence[float],
+             P: Real[ArrayLike, "17 17"]) -> EkfState:
     """Initial state (arrays coerced to float64)."""
     f = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
     return EkfState(f(q), f(r), f(v), f(bg), f(ba), f(clk), f(P))
@@ -539,8 +555,11 @@ class EkfOutput(NamedTuple):
     n_used: jnp.ndarray
 
 
-def run_ekf(state0: EkfState, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m,
-            params: EkfParams):
+def run_ekf(state0: EkfState, gyro: Float[ArrayLike, "E n 3"], accel: Float[ArrayLike, "E n 3"],
+            z: Float[ArrayLike, "E L"], valid: Bool[ArrayLike, "E L"],
+            tx_pos: Float[ArrayLike, "L 3"], tx_clk_m: Float[ArrayLike, "E L"],
+            sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""], params: EkfParams
+            ) -> tuple[EkfState, EkfOutput]:
     """Run the EKF over E epochs with ``lax.scan``.
 
     ``gyro``, ``accel``: (E, n, 3) IMU samples of each interval (n per pseudorange epoch);

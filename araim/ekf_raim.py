@@ -33,6 +33,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Array, Bool, Float, Real
 
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.chi2 import detection_threshold, noncentrality
@@ -184,8 +186,14 @@ def raim_update(carry: RaimCarry, state_prior, phi, z, valid, tx_pos, tx_clk_m, 
     return RaimCarry(state, xi, used, jnp.asarray(False)), out
 
 
-def run_ekf_raim(state0, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m, params,
-                 tables: RaimTables, dof_offset=0, exclude=True, hal_m=30.0):
+def run_ekf_raim(state0: _ekf.EkfState, gyro: Float[ArrayLike, "E n 3"],
+                 accel: Float[ArrayLike, "E n 3"], z: Float[ArrayLike, "E L"],
+                 valid: Bool[ArrayLike, "E L"], tx_pos: Float[ArrayLike, "L 3"],
+                 tx_clk_m: Float[ArrayLike, "E L"],
+                 sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""],
+                 params: _ekf.EkfParams, tables: RaimTables, dof_offset: int = 0,
+                 exclude: bool | Bool[ArrayLike, ""] = True, hal_m: float = 30.0
+                 ) -> tuple[RaimCarry, tuple[Float[Array, "E 3"], RaimEpoch]]:
     """EKF + RAIM over E epochs of recorded data (lax.scan). ``gyro``/``accel`` (E, n, 3),
     ``z``/``valid``/``tx_clk_m`` (E, L). Returns (final carry, (EkfOutput-like position r (E, 3),
     RaimEpoch stacked))."""

@@ -47,12 +47,15 @@ and at the truth (errors). ``frame="enu"``: positions already in one local ENU f
 simulation), the axes are the frame's own.
 """
 
+from collections.abc import Sequence
 from functools import partial
-from typing import NamedTuple, Protocol
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Bool, Int, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
@@ -329,10 +332,20 @@ class ReplayConfig(NamedTuple):
 DEFAULT_REPLAY = ReplayConfig()
 
 
-def replay(pseudorange_m, tx_pos_m, var_int_m2, var_acc_m2, valid, truth_m, *,
-           correction_m=0.0, constellation=None, p_const=(1e-8,), p_sat=1e-5, b_nom_m=0.75,
-           slope_sigma_m=None, x0_m=None, config: ReplayConfig = DEFAULT_REPLAY
-           ) -> ReplayResult:
+#: a per-source input of ``replay``: (T, L) or anything that broadcasts to it
+_PerSource = Real[ArrayLike, "*#t #L"] | Real[ArrayLike, ""]
+
+
+def replay(pseudorange_m: Real[ArrayLike, "T L"], tx_pos_m: Real[ArrayLike, "*#t #L 3"],
+           var_int_m2: _PerSource, var_acc_m2: _PerSource,
+           valid: Bool[ArrayLike, "*#t #L"] | Bool[ArrayLike, ""],
+           truth_m: Real[ArrayLike, "*#t 3"], *, correction_m: _PerSource = 0.0,
+           constellation: Int[ArrayLike, "*#t #L"] | Int[ArrayLike, ""] | None = None,
+           p_const: Real[ArrayLike, "*#t C"] | Sequence[float] = (1e-8,),
+           p_sat: _PerSource = 1e-5, b_nom_m: _PerSource = 0.75,
+           slope_sigma_m: _PerSource | None = None,
+           x0_m: Real[ArrayLike, "*#t state"] | None = None,
+           config: ReplayConfig = DEFAULT_REPLAY) -> ReplayResult:
     """Snapshot replay of T epochs of L sources (module docstring).
 
     Args:
@@ -464,6 +477,7 @@ class ReplayInputs(NamedTuple):
     """(T,) its vertical error, m."""
 
 
+@runtime_checkable
 class Monitor(Protocol):
     """A replay monitor: what ``register_monitor`` takes."""
 
