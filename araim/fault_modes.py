@@ -214,7 +214,8 @@ class FaultModes(NamedTuple):
 def fault_modes_batch_last(valid: Bool[ArrayLike, "L B"], constellation: Int[ArrayLike, "L B"],
                            p_sat: Float[ArrayLike, "L B"], p_const: Float[ArrayLike, "C B"],
                            p_thresh: float, max_order: int) -> FaultModes:
-    """Live modes, exclusion sets and priors (static template), batch-last layout."""
+    """Live modes, exclusion sets and priors (static template), batch-last layout: valid,
+    constellation, p_sat (L, B), p_const (C, B); ``FaultModes`` as its fields say."""
     C = p_const.shape[0]
     L = valid.shape[0]
     tpl = mode_template(L, C, max_order)

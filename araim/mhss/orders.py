@@ -34,8 +34,9 @@ def required_order(valid: Bool[ArrayLike, "*batch L"], constellation: Int[ArrayL
                    budget: IntegrityBudget | float, cap: int = MAX_AUTO_ORDER,
                    fault_modes: str | FaultModeRule | None = None) -> int:
     """Smallest template order meeting the convention for every geometry of the batch, at most
-    ``cap``. ``grouped``: the number of simultaneously faulty constellations r with
-    P(more than r) <= P_thresh (``budget`` may then be P_thresh alone); event conventions
+    ``cap``; valid, constellation, p_sat (..., L) and p_const (..., C), batch first.
+    ``grouped``: the number of simultaneously faulty constellations r with P(more than r) <=
+    P_thresh (``budget`` may then be P_thresh alone); event conventions
     (``budget`` an ``IntegrityBudget``): the smallest order at which no geometry would monitor
     a set beyond it (at most 2)."""
     if isinstance(budget, IntegrityBudget):
