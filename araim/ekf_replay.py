@@ -348,11 +348,12 @@ def replay_filter_monitor(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
                           p_const: float = 1e-8, fault_modes: str = "add-v4.2",
                           spec: imu.ImuSpec | None = None,
                           init_uncertainty: _er.InitialUncertainty | None = None,
-                          initial: dict | None = None) -> FilterReplay:
+                          initial: dict | None = None, exclusion: bool = False) -> FilterReplay:
     """The solution-separation filter bank (``araim.run_ekf_monitor``, docs/filter-integrity.md)
     over a recorded drive: the same preparation, initial state and EKF as ``replay_ekf_raim``,
     every tower one source of one operator (P_s ``p_sat`` per epoch, P_const ``p_const``),
-    order 1 of ``fault_modes``."""
+    order 1 of ``fault_modes``; ``exclusion``: exclusion by restart
+    (``araim.filter_monitor.exclusion_restart``)."""
     init_uncertainty = _er.InitialUncertainty() if init_uncertainty is None else init_uncertainty
     if not (np.isfinite(sigma_pr_m) and sigma_pr_m > 0):
         raise ValueError(f"sigma_pr_m must be a positive number, got {sigma_pr_m!r}")
@@ -367,7 +368,7 @@ def replay_filter_monitor(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
         est0, jnp.asarray(prep.gyro), jnp.asarray(prep.accel), jnp.asarray(prep.z),
         jnp.asarray(prep.valid), jnp.asarray(prep.towers), jnp.asarray(prep.tx_clk),
         jnp.asarray(prep.sigma), params, np.zeros(n_t, int), np.full(n_t, p_sat),
-        np.array([p_const]), budget, 1, fault_modes)
+        np.array([p_const]), budget, 1, fault_modes, exclusion=bool(exclusion))
     out = jax.tree.map(np.asarray, out)
     err2 = None
     if rec.truth is not None:

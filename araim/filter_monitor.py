@@ -52,7 +52,7 @@ from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.status import Status
 
 __all__ = ["FilterMonitorEpoch", "LinearModel", "ekf_bank_step", "epoch_modes_and_used",
-           "false_alert_factors", "linear_update", "n_bank_filters",
+           "exclusion_restart", "false_alert_factors", "linear_update", "n_bank_filters",
            "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
 
 
@@ -92,6 +92,8 @@ class FilterMonitorEpoch(NamedTuple):
     """() P_NM of eqs. (14), (16)."""
     status: jax.Array
     """() ``araim.Status`` (int8)."""
+    excluded_sources: jax.Array
+    """(L,) bool: the sources excluded so far (``exclusion=True`` of the banks; else none)."""
 
 
 def n_bank_filters(n_sources: int, n_constellations: int, max_order: int = 1,
@@ -172,7 +174,29 @@ def separation_monitor(x_pos, p_pos, fm, budget: IntegrityBudget,
         hpl_m=hpl, vpl_m=pl[2], emt_m=emt, pl_enu_m=pl, position_m=x_pos[0], separation_m=sep,
         sigma_m=sigma, sigma_ss_m=sigma_ss, threshold_m=threshold, test_ratio=test,
         alert=test > 1.0, prior=prior, monitored=monitored, n_modes=n_modes,
-        p_not_monitored=p_nm, status=status)
+        p_not_monitored=p_nm, status=status,
+        excluded_sources=jnp.zeros(fm.excluded.shape[1], bool))
+
+
+def exclusion_restart(bank, out: FilterMonitorEpoch, fm, excluded_sources, enabled):
+    """Exclusion by restart (Brenner 1996's bank, the restart variant): where ``enabled`` and
+    the epoch alerts, the sub-filter whose separation exceeds its threshold the most (largest
+    max_q |Delta_i,q| / T_i,q) becomes the main filter, its mode's sources are excluded from
+    then on, and every filter of the bank restarts as a copy of it (state and covariance), so
+    the new sub-filters (that mode's exclusion plus each other mode's) begin with zero
+    separation. Returns (bank, excluded sources (L,), the epoch's output with them).
+    ``enabled`` False (static): nothing is done (no select over the bank)."""
+    if enabled is False:
+        return bank, excluded_sources, out._replace(excluded_sources=excluded_sources)
+    thr = out.threshold_m
+    ratio = jnp.max(jnp.where(thr > 0.0, jnp.abs(out.separation_m)
+                              / jnp.where(thr > 0.0, thr, 1.0), 0.0), axis=1)
+    best = jnp.argmax(ratio)
+    do = enabled & out.alert
+    sets = jnp.concatenate([jnp.zeros_like(fm.excluded[:1, :, 0]), fm.excluded[:, :, 0]])
+    excluded_sources = excluded_sources | (do & sets[best])
+    bank = jax.tree.map(lambda a: jnp.where(do, jnp.broadcast_to(a[best], a.shape), a), bank)
+    return bank, excluded_sources, out._replace(excluded_sources=excluded_sources)
 
 
 def epoch_modes_and_used(valid, constellation, p_sat, p_const, budget, rule, max_order):
@@ -224,15 +248,16 @@ def linear_update(x, p, h, z, r_var, used):
 def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sat, p_const,
                        budget: IntegrityBudget, max_order: int = 1,
                        fault_modes: FaultModeRule = DEFAULT_RULE,
-                       iterations: int = PL_ITERATIONS):
+                       iterations: int = PL_ITERATIONS, exclusion: bool = False):
     """The filter bank on a linear model over E epochs (one ``lax.scan``).
 
     ``x0`` (n,), ``p0`` (n, n): the common prior of every filter; ``z``, ``valid`` (E, L);
     ``constellation`` (L,) int labels 0..C-1; ``p_sat`` (E, L) or (L,) per-epoch priors;
     ``p_const`` (C,); ``max_order`` static. Per epoch: predict every filter
     (x <- Phi x, P <- Phi P Phi^T + Q), update filter i with its used sources
-    (``linear_update``), then ``separation_monitor``. Returns (final (x (K, n), P (K, n, n)),
-    ``FilterMonitorEpoch`` stacked over epochs)."""
+    (``linear_update``), then ``separation_monitor``; ``exclusion`` (static) then
+    ``exclusion_restart`` (the excluded sources are not valid afterwards). Returns (final
+    (x (K, n), P (K, n, n)), ``FilterMonitorEpoch`` stacked over epochs)."""
     rule = fault_mode_rule(fault_modes)
     max_order = check_order(rule, max_order)
     E, L = z.shape
@@ -244,18 +269,21 @@ def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sa
     ps = jnp.broadcast_to(jnp.asarray(p0, jnp.float64), (K,) + p0.shape)
 
     def body(carry, inp):
-        x, p = carry
+        x, p, gone = carry
         phi, q, h, r_var, zz, vv, ps_e = inp
-        fm, used = epoch_modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        fm, used = epoch_modes_and_used(vv & ~gone, constellation, ps_e, p_const, budget, rule,
+                                        max_order)
         x = x @ phi.T
         p = phi @ p @ phi.T + q
         x, p = jax.vmap(linear_update, in_axes=(0, 0, None, None, None, 0))(x, p, h, zz, r_var,
                                                                           used)
         out = separation_monitor(x[:, :3], p[:, :3, :3], fm, budget, iterations)
-        return (x, p), out
+        (x, p), gone, out = exclusion_restart((x, p), out, fm, gone, exclusion)
+        return (x, p, gone), out
 
-    return jax.lax.scan(body, (xs, ps), (model.phi, model.q, model.h, model.r_var, z,
-                                         jnp.asarray(valid, bool), p_sat))
+    (x, p, _), out = jax.lax.scan(body, (xs, ps, jnp.zeros(L, bool)), (
+        model.phi, model.q, model.h, model.r_var, z, jnp.asarray(valid, bool), p_sat))
+    return (x, p), out
 
 
 # ------------------------------------------------------------------------------------------
@@ -279,12 +307,12 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
                     params: _ekf.EkfParams, constellation, p_sat, p_const,
                     budget: IntegrityBudget, max_order: int = 1,
                     fault_modes: FaultModeRule = DEFAULT_RULE,
-                    iterations: int = PL_ITERATIONS):
+                    iterations: int = PL_ITERATIONS, exclusion: bool = False):
     """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); inputs as
     ``araim.ekf.run_ekf`` (``gyro``, ``accel`` (E, n, 3); ``z``, ``valid``, ``tx_clk_m`` (E, L);
     ``tx_pos`` (L, 3); ``sigma_m`` scalar, (L,) or (E, L)) plus the towers' operator labels
     ``constellation`` (L,), their priors ``p_sat`` (L,) or (E, L) and ``p_const`` (C,). Every
-    filter starts from ``state0``. Returns
+    filter starts from ``state0``; ``exclusion`` (static): ``exclusion_restart``. Returns
     (final bank states, ``FilterMonitorEpoch`` stacked over epochs); the position is ENU in
     the filter's frame G."""
     rule = fault_mode_rule(fault_modes)
@@ -297,12 +325,16 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
     sigma = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64), (E, L))
     bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), state0)
 
-    def body(bank, inp):
+    def body(carry, inp):
+        bank, gone = carry
         g, a, zz, vv, tc, ps_e, sg = inp
-        fm, used = epoch_modes_and_used(vv, constellation, ps_e, p_const, budget, rule, max_order)
+        fm, used = epoch_modes_and_used(vv & ~gone, constellation, ps_e, p_const, budget, rule,
+                                        max_order)
         bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sg, params)
         out = separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, budget, iterations)
-        return bank, out
+        bank, gone, out = exclusion_restart(bank, out, fm, gone, exclusion)
+        return (bank, gone), out
 
-    return jax.lax.scan(body, bank0, (gyro, accel, z, jnp.asarray(valid, bool), tx_clk_m,
-                                      p_sat, sigma))
+    (bank, _), out = jax.lax.scan(body, (bank0, jnp.zeros(L, bool)), (
+        gyro, accel, z, jnp.asarray(valid, bool), tx_clk_m, p_sat, sigma))
+    return bank, out

@@ -62,11 +62,15 @@ def _run(h, sig, z, q=0.0, valid=None):
                                    jnp.asarray(valid), CON, P_SAT, P_CONST, BUDGET, 1, RULE)[1]
 
 
-def _case(seed, static):
+def _case(seed, static, sigma_m=None):
+    """Rows, sigmas (uniform 0.5-3 m, or ``sigma_m``), design matrices and measurements (with
+    noise of those sigmas) of E epochs of L sources."""
     rng = np.random.default_rng(seed)
     g = _rows(rng, (L,)) if static else _rows(rng, (E, L))
     g = np.broadcast_to(g, (E, L, 3))
     sig = rng.uniform(0.5, 3.0, (E, L))
+    if sigma_m is not None:
+        sig = np.full_like(sig, sigma_m)
     h = _design(g)
     x = rng.normal(size=N) * 20.0
     z = np.einsum("eln,n->el", h, x) + sig * rng.normal(size=(E, L))
@@ -195,19 +199,47 @@ def test_false_alert_factors_closed_form():
     assert float(k[2]) == pytest.approx(-special.ndtri(BUDGET.p_fa_v / 18.0), rel=1e-14)
 
 
-def test_fault_on_one_tower_is_detected_and_separation_points_at_it():
-    """A 40 m step on tower 2 from epoch 2 (static state, no process noise): the sub-filter
-    without tower 2 is the only one whose separation grows past its threshold."""
-    g, sig, h, z = _case(11, static=False)
-    sig = np.full_like(sig, 0.5)
+def test_fault_on_one_tower_is_detected_and_its_subfilter_separates():
+    """A 40 m step on tower 2 from epoch 2 (static state, no process noise, the filter's sigma
+    the truth's): no alert before the onset, alerts from it on, and the sub-filter without
+    tower 2 (slot 1 + 2) is among the modes whose separation exceeds its threshold (the largest
+    ratio need not be its own: with 8 sources of 0.5 m the other modes' separations also move)."""
+    g, sig, h, z = _case(11, static=False, sigma_m=0.5)
     z = z.copy()
     z[2:, 2] += 40.0
     out = _run(h, sig, z)
-    assert not bool(out.alert[1]) or float(out.test_ratio[1]) < float(out.test_ratio[2])
-    assert bool(out.alert[-1])
+    assert not np.asarray(out.alert)[:2].any() and np.asarray(out.alert)[2:].all()
     ratio = np.abs(np.asarray(out.separation_m[-1])) / np.where(
         np.asarray(out.threshold_m[-1]) > 0, out.threshold_m[-1], np.inf)
-    assert int(np.argmax(ratio.max(1))) == 1 + 2      # slot 1 + l: the single-source modes
+    assert ratio[1 + 2].max() > 1.0
+
+
+def test_exclusion_restart_makes_the_fault_free_subfilter_the_main_one():
+    """The step of the test above with ``exclusion=True``: at the first alert the sub-filter
+    without tower 2 (which never used it) becomes the main filter and tower 2 is excluded from
+    then on, so the main filter at the last epoch is the stacked least squares of the 4 epochs
+    without tower 2 (1e-6 m), and the bank restarted from it stops alerting."""
+    g, sig, h, z = _case(11, static=False, sigma_m=0.5)
+    z = z.copy()
+    z[2:, 2] += 40.0
+    e = h.shape[0]
+    model = fmon.LinearModel(jnp.broadcast_to(jnp.eye(N), (e, N, N)), jnp.zeros((e, N, N)),
+                             jnp.asarray(h), jnp.asarray(sig**2))
+    run = lambda excl: fmon.run_linear_monitor(  # noqa: E731
+        jnp.zeros(N), 1e12 * jnp.eye(N), model, jnp.asarray(z), jnp.ones((e, L), bool), CON,
+        P_SAT, P_CONST, BUDGET, 1, RULE, exclusion=excl)[1]
+    out, plain = run(True), run(False)
+    first = int(np.argmax(np.asarray(plain.alert)))
+    assert bool(plain.alert[first]) and first >= 2
+    gone = np.asarray(out.excluded_sources)
+    assert not gone[:first].any() and np.all(gone[first:] == (np.arange(L) == 2))
+    kept = np.ones((E, L), bool)
+    kept[:, 2] = False
+    x_ref, _ = _stacked_wls(h, sig, z, kept)
+    np.testing.assert_allclose(out.position_m[-1], x_ref, atol=1e-6)
+    assert np.linalg.norm(plain.position_m[-1] - x_ref) > 1.0   # without: the fault is in
+    assert not np.asarray(out.alert)[first + 1:].any()
+    assert not np.asarray(plain.excluded_sources).any()
 
 
 def test_bank_size_matches_template():
@@ -219,7 +251,8 @@ def test_replay_of_a_recorded_drive_main_filter_is_the_ekf(tmp_path):
     """A synthesized seed 000 drive (clean world, 30 s, 30 m fault on tower 1 from 25 s),
     written and loaded as a recording: the bank's main filter is the replay's EKF without
     exclusion (same preparation, initial state and updates: positions equal to 1e-6 m), every
-    epoch has a finite HPL, and the bank alerts after the onset, not before."""
+    epoch has a finite HPL, and the bank alerts after the onset, not before; with exclusion
+    (by restart) the faulty tower goes."""
     from oaraim import mc, sim
     from oaraim.araim import ekf_replay
 
@@ -235,6 +268,12 @@ def test_replay_of_a_recorded_drive_main_filter_is_the_ekf(tmp_path):
     after = fr.t_s >= 25.0
     assert fr.monitor.alert[after].mean() > 0.9 and not fr.monitor.alert[~after].any()
     assert np.all(np.isfinite(fr.err_2d_m))
+    # exclusion by restart: tower 1 (index 0) out from the first alert on, the error after the
+    # onset smaller than the unexcluded bank's (which absorbs the 30 m bias)
+    fx = ekf_replay.replay_filter_monitor(loaded, exclusion=True)
+    gone = fx.monitor.excluded_sources
+    assert not gone[~after].any() and np.all(gone[-1] == (np.arange(gone.shape[1]) == 0))
+    assert fx.err_2d_m[after].mean() < fr.err_2d_m[after].mean() / 2
 
 
 def test_gradient_of_the_filter_hpl_matches_finite_differences():
