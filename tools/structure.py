@@ -36,6 +36,10 @@ with ``ast`` and imports nothing, so it also runs on a tree that does not import
 - A *tracker reference* (the word issue and a number, or a number after "(#") in the
   package, the tests, tools, docs, results, README or CHANGELOG: a reader cannot see the
   tracker, so the text states the decision.
+- *Shapes as types*: of the functions the ``araim`` and ``geometry`` faces export (the public
+  kernels among them), how many have every parameter and the return annotated, and how many
+  carry a ``jaxtyping`` array type (``Float[Array, "T L 3"]``, or a module-level alias of one);
+  reported, and checked at run time by tests/test_shapes.py.
 - An *undocumented* name is a public function or class at the top level of a public module, or
   a public method of such a class, without a docstring (``ast.get_docstring``). A module is
   public when no component of its dotted name starts with "_" (a package ``__init__`` counts
@@ -342,6 +346,85 @@ def _parameters(fn, method: bool) -> int:
     return n - 1 if method and not static and n else n
 
 
+#: the faces whose exported functions carry shapes as types (tests/test_shapes.py checks them)
+SHAPED_FACES = ("araim", "geometry")
+#: a jaxtyping array type in an annotation's source (``Float[``, ``Int8[``, ``PRNGKeyArray``)
+SHAPE_RE = re.compile(r"\b(?:Float|Real|Int|UInt|Bool|Shaped|Complex|Num|Inexact|Integer|Key)"
+                      r"\d*\[|\bPRNGKeyArray\b")
+
+
+def _exported_function(mods: dict[str, Path], module: str, name: str, depth: int = 0):
+    """(module, FunctionDef) of what ``name`` in ``module`` is: a def, a name imported from
+    another module of the package, or ``name = wrapper(fn)`` (``jax.jit``); None otherwise."""
+    if depth > 5 or module not in mods:
+        return None
+    tree = ast.parse(mods[module].read_text())
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == name:
+            return module, node, tree
+        if (isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name
+                                                 for t in node.targets)
+                and isinstance(node.value, ast.Call) and node.value.args
+                and isinstance(node.value.args[0], ast.Name)):
+            return _exported_function(mods, module, node.value.args[0].id, depth + 1)
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("oaraim"):
+            for a in node.names:
+                if (a.asname or a.name) == name:
+                    if f"{node.module}.{a.name}" in mods:
+                        return None  # a module (a namespace), not a function
+                    return _exported_function(mods, node.module, a.name, depth + 1)
+    return None
+
+
+def shape_annotations(root: Path = ROOT) -> dict:
+    """Per face of ``SHAPED_FACES``: the functions it exports (``__all__``; a name loaded on
+    first use is looked up in the face's modules), how many are fully annotated and how many
+    carry a jaxtyping array type, and the dotted names of those without one."""
+    mods = modules(root)
+    out = {}
+    for layer in SHAPED_FACES:
+        face = f"oaraim.{layer}"
+        if face not in mods:
+            continue
+        init = ast.parse(mods[face].read_text())
+        # a name loaded on first use (PEP 562): the face's ``__getattr__`` names its module
+        lazy_modules = {f"{face}.{c.value}" for f in init.body
+                        if isinstance(f, ast.FunctionDef) and f.name == "__getattr__"
+                        for c in ast.walk(f)
+                        if isinstance(c, ast.Constant) and isinstance(c.value, str)}
+        found = {}
+        for name in sorted(face_names(root)[face]):
+            hit = _exported_function(mods, face, name)
+            if hit is None and f"{face}.{name}" not in mods:
+                hits = [h for m in sorted(lazy_modules & set(mods))
+                        for h in [_exported_function(mods, m, name)] if h and h[0] == m]
+                hit = hits[0] if len(hits) == 1 else None
+            if hit is not None:
+                found[name] = hit
+        full, shaped, unshaped, unannotated = 0, 0, [], []
+        for _, (mod, fn, tree) in sorted(found.items()):
+            aliases = {t.id for node in tree.body if isinstance(node, ast.Assign)
+                       and SHAPE_RE.search(ast.unparse(node.value))
+                       for t in node.targets if isinstance(t, ast.Name)}
+            a = fn.args
+            params = [*a.posonlyargs, *a.args, *a.kwonlyargs,
+                      *(x for x in (a.vararg, a.kwarg) if x is not None)]
+            hints = [ast.unparse(x.annotation) for x in params if x.annotation is not None]
+            if len(hints) == len(params) and fn.returns is not None:
+                full += 1
+            else:
+                unannotated.append(f"{mod}.{fn.name}")
+            text = " ".join(hints + ([ast.unparse(fn.returns)] if fn.returns else []))
+            if SHAPE_RE.search(text) or any(re.search(rf"\b{x}\b", text) for x in aliases):
+                shaped += 1
+            else:
+                unshaped.append(f"{mod}.{fn.name}")
+        out[layer] = {"functions": len(found), "annotated": full, "shaped": shaped,
+                      "names": sorted(found), "unshaped": unshaped,
+                      "unannotated": unannotated}
+    return out
+
+
 def tracker_references(root: Path = ROOT) -> list[str]:
     """Every "issue N" / "(#N)" in the package and in ``TRACKER_PLACES``, as "file:line:
     text"."""
@@ -434,6 +517,7 @@ def report(root: Path = ROOT) -> dict:
         "max_parameters": MAX_PARAMETERS,
         "over_max_parameters": [[name, n] for n, name in sigs if n > MAX_PARAMETERS],
         "tracker_references": tracker_references(root),
+        "shape_annotations": shape_annotations(root),
     }
 
 
@@ -476,6 +560,9 @@ def main(argv=None) -> int:
         print(f"tracker references in code and docs: {len(rep['tracker_references'])}")
         for line in rep["tracker_references"]:
             print("  " + line)
+        for layer, c in rep["shape_annotations"].items():
+            print(f"shapes as types, {layer}: {c['shaped']} of {c['functions']} exported "
+                  f"functions carry jaxtyping array types; {c['annotated']} fully annotated")
     broken = (rep["private_imports"] or rep["cycles"] or rep["layer_violations"]
               or rep["over_max_lines"] or rep["undocumented"] or rep["face_bypasses"]
               or rep["over_max_parameters"] or rep["tracker_references"])
