@@ -603,6 +603,9 @@ def markdown_table(bench_json: dict) -> str:
         rows.append(("`geometry.sky`, nominal GPS + Galileo", "1,000 receivers x 288 epochs",
                      f"{k['receivers_1000_x_288_epochs_nominal_s']:.3f} s", "-", "-",
                      *host(k)))
+    if "leo_mhss" in bench_json:
+        from oaraim.bench_leo import leo_rows
+        rows += leo_rows(bench_json["leo_mhss"], host)
     if "ekf_drive" in bench_json:
         e = bench_json["ekf_drive"]
         fallback = next((b.get("host") for b in bench_json.values()

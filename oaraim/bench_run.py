@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 #: the parts of ``oaraim bench`` that ``--only`` chooses from (all run by default)
 BENCH_PARTS = ("startup", "latency", "slope", "mhss", "fig3", "sky", "ekf", "filterbank", "map",
-               "risk")
+               "risk", "leo")
 #: the 1 x 1 deg world grid of the ``world-map`` and ``dask-map`` parts
 WORLD_1DEG = {"lat_deg": "-90:90:1", "lon_deg": "-180:179:1"}
 
@@ -102,6 +102,15 @@ def run_bench(parts, quick: bool = False, mhss_batch: int | None = None,
         res["availability_map_dask"] = a = b.bench_availability_map(WORLD_1DEG, workers=2)
         say(f"availability-map 1 x 1 deg on Dask (2 workers), {a['users']:,} users x "
             f"{a['epochs']} epochs: {a['wall_s']:.1f} s wall ({a['pl_per_s']:,.0f} PL/s)")
+    if "leo" in parts:
+        from oaraim.bench_leo import bench_leo
+
+        res["leo_mhss"] = recs = bench_leo(b.host_info, batch=1_024 if quick else 4_096)
+        for m in recs:
+            say(f"MHSS with LEO, L = {m['L']} ({m['fault_modes']}, order {m['order']}, "
+                f"{m['n_modes']} modes): {m['jax_pl_per_s']:,.0f} PL/s; NumPy reference "
+                f"{m['reference_pl_per_s']:,.1f} PL/s; max |VPL difference| "
+                f"{m['max_abs_diff_vpl_m']:.1e} m")
     if "fig4" in parts:
         res["fig4"] = f = b.bench_fig4()
         say(f"seed004-fig4-hpl-maps full size ({f['cells']:,} cells x "
