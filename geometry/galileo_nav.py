@@ -53,7 +53,7 @@ SHS_NAMES = {0: "OK", 1: "out of service", 2: "extended operations mode", 3: "in
 _HEALTH_BITS = {"E1B": 0, "E5a": 3, "E5b": 6}  # DVS bit; SHS is the two bits above it
 
 
-def gst_week_from_rinex(week) -> np.ndarray:
+def gst_week_from_rinex(week) -> np.ndarray | np.integer:
     """The GST week number of the navigation message from the RINEX 3 'GAL week' (continuous
     from the GPS epoch, aligned to the GPS week): week - 1024."""
     return np.asarray(week, np.int64) - gpstime.WEEK_ROLLOVER

@@ -381,7 +381,8 @@ def _pivot(df: pd.DataFrame, key: str, ids, value, t_s) -> EpochMatrix:
 
 def pseudorange_matrix(recording: Recording, tx_ids: Sequence[str] | None = None,
                        value: str | Sequence[str] = "pseudorange_m",
-                       t_s: Real[ArrayLike, " T"] | None = None) -> EpochMatrix:
+                       t_s: Real[ArrayLike, " T"] | Sequence[float] | None = None
+                      ) -> EpochMatrix:
     """Terrestrial pseudoranges as ``(t_s (T,), values (T, L), valid (T, L), ids (L,))``.
 
     Epochs are the sorted unique ``t_s`` of the table (or the strictly increasing grid ``t_s``
@@ -399,7 +400,8 @@ def pseudorange_matrix(recording: Recording, tx_ids: Sequence[str] | None = None
 
 def gnss_matrix(recording: Recording, sv_ids: Sequence[str] | None = None,
                 value: str | Sequence[str] = "pseudorange_m",
-                t_s: Real[ArrayLike, " T"] | None = None) -> EpochMatrix:
+                t_s: Real[ArrayLike, " T"] | Sequence[float] | None = None
+               ) -> EpochMatrix:
     """GNSS rows pivoted like :func:`pseudorange_matrix`; columns default to the sorted unique
     sv_id (``"E11" < "G05"``). ``value=["sat_x_m", "sat_y_m", "sat_z_m"]`` gives positions."""
     if recording.gnss is None:
@@ -430,7 +432,7 @@ def _tx_rows(recording: Recording, tx_ids) -> pd.DataFrame:
     return tx.iloc[idx]
 
 
-def tower_clock_m(recording: Recording, t_s: Real[ArrayLike, "*t"],
+def tower_clock_m(recording: Recording, t_s: Real[ArrayLike, "*t"] | Sequence[float],
                   tx_ids: Sequence[str] | None = None) -> Float[np.ndarray, "*t L"]:
     """Transmitter clocks c dt_s(t) = clock_bias_m + clock_drift_mps (t_s - clock_t0_s) (seed 000
     eq. 3), shape ``t_s.shape + (L,)``, columns in ``tx_ids`` (default: table) order."""
@@ -484,7 +486,7 @@ def truth_enu(recording: Recording) -> TruthENU:
     return TruthENU(tr["t_s"].to_numpy(np.float64), pos, vel, q)
 
 
-def t_gps_s(recording: Recording, t_s) -> np.ndarray:
+def t_gps_s(recording: Recording, t_s) -> np.ndarray | float:
     """GPS seconds (since 1980-01-06, ``geometry.gpstime``) of recording times ``t_s``."""
     wk, tow = recording.meta.get("t0_gps_week"), recording.meta.get("t0_gps_tow_s")
     if wk is None:
