@@ -141,7 +141,7 @@ def cell(d, keep, n, sigma, log10_p_s, p_const_leo, vpl0, hpl0, *, max_order, si
                                            fault_modes=rule)
         both = keep & jnp.isfinite(r.vpl_m) & jnp.isfinite(r.hpl_m) & jnp.isfinite(vpl0) \
             & jnp.isfinite(hpl0)
-        m = jnp.maximum(jnp.sum(both), 1)
+        m = jnp.where(jnp.sum(both) > 0, jnp.sum(both), jnp.nan)  # no user: NaN, not 0
         dv = jnp.sum(jnp.where(both, jnp.where(both, r.vpl_m, 0.0) - jnp.where(both, vpl0, 0.0),
                                0.0)) / m
         dh = jnp.sum(jnp.where(both, jnp.where(both, r.hpl_m, 0.0) - jnp.where(both, hpl0, 0.0),
@@ -241,7 +241,7 @@ class LeoSensitivity(ResumableStudy):
     seed_file = "004_55e51818ceb3e5a9.txt"
     realization = ("one user (uniform in area within +-lat_max_deg) at one epoch of a day of "
                    "nominal GPS + Galileo and the LEO shell")
-    default_realizations = 1000
+    default_realizations = 500
     quick_realizations = 128
     quick_cost_s = 60
     max_realizations = 20_000
@@ -252,14 +252,16 @@ class LeoSensitivity(ResumableStudy):
                                 axis(parse_choice(*geometry.LEO_PRESETS)),
                                 "LEO constellations (Walker presets, docs/leo.md); ORBCOMM's "
                                 "VHF ionosphere (~600 m) leaves it nothing to add"),
-        "n_leo": Param((4, 8, 12), axis(count(1, 20)), "LEO satellites used (highest "
+        "n_leo": Param((2, 4, 8, 12), axis(count(1, 20)), "LEO satellites used (highest "
                        "elevation first)"),
         "sigma_ura_leo_m": Param((0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0), axis(positive),
                                  "sigma_URA^LEO grid (sigma_URE 2/3 of it)", "m"),
         "p_s_leo": Param((1e-7, 1e-5, 1e-4, 1e-3), axis(probability), "P_s^LEO grid"),
         "p_const_leo": Param(1e-4, probability, "P_const^LEO"),
         "mask_deg": Param(5.0, in_range(0.0, 60.0), "GNSS elevation mask (ADD)", "deg"),
-        "leo_mask_deg": Param(25.0, in_range(0.0, 80.0), "LEO elevation mask", "deg"),
+        "leo_mask_deg": Param(10.0, in_range(0.0, 80.0), "LEO elevation mask (10 deg: "
+                              "Iridium's 66 and Globalstar's 48 satellites rarely give 4 above "
+                              "Starlink's 25 deg)", "deg"),
         "lat_max_deg": Param(60.0, in_range(1.0, 90.0), "users within +- this latitude",
                              "deg"),
         "fault_modes": fault_modes_param("grouped", "seed 004's Fig. 4 convention (P_s up to "

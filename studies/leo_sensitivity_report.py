@@ -25,9 +25,9 @@ def finish(params, ds, realizations):
             r0 = float(sel.sigma_boundary_m.sel(p_s_leo=p0))
             rows.append({"quantity": f"{c}, {int(n)} LEO used: largest sigma_URA^LEO still "
                          f"lowering the mean VPL (P_s^LEO {p0:g})", "unit": "m",
-                         "published": None, "reproduced": None if np.isnan(r0) else r0,
-                         "note": f"Newton on exact derivatives; {100 * share:.0f} % of the "
-                         f"users see >= {int(n)}; inf: still helps at "
+                         "published": None, "reproduced": r0,
+                         "note": f"Newton on exact derivatives; {100 * share:.1f} % of the "
+                         f"users see >= {int(n)} (none: NaN); inf: still helps at "
                          "128 m (the largest probe), NaN: not even at 0.25 m"})
     metrics["realizations"] = int(realizations)
     metrics["fault_modes"] = params["fault_modes"]
