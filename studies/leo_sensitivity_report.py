@@ -38,7 +38,7 @@ def finish(params, ds, realizations):
 
 def plot(ds, out_dir):
     """leo_sensitivity.png: per constellation (rows) and n (columns) the mean VPL change
-    (m, diverging, fixed scale -10..10 m; grey: not computable) over sigma_URA^LEO x
+    (m, diverging, fixed scale -5..5 m; grey: no user sees n, or no PL) over sigma_URA^LEO x
     P_s^LEO, with the Newton boundary (black)."""
     import matplotlib
 
@@ -52,7 +52,7 @@ def plot(ds, out_dir):
     size = (max(3.6 * len(ns) + 1.2, 7.0), 2.9 * len(cs) + 0.8)
     fig, axes = plt.subplots(len(cs), len(ns), figsize=size, squeeze=False, sharex=True,
                              sharey=True, layout="constrained")
-    norm = TwoSlopeNorm(vmin=-10.0, vcenter=0.0, vmax=10.0)
+    norm = TwoSlopeNorm(vmin=-5.0, vcenter=0.0, vmax=5.0)
     cmap = matplotlib.colormaps["RdBu_r"].copy()
     cmap.set_bad("0.8")
     mesh = None
@@ -78,7 +78,7 @@ def plot(ds, out_dir):
     fig.colorbar(mesh, ax=axes, label="mean VPL change (m); < 0: LEO helps", shrink=0.8)
     fig.suptitle(f"GPS + Galileo + n LEO satellites ({ds.attrs.get('fault_modes', '')}, "
                  "LPV-200): mean VPL change\n"
-                 "black: largest sigma_URA^LEO still lowering it (Newton); grey: no PL",
+                 "black: largest sigma_URA^LEO still lowering it (Newton); grey: no user sees n",
                  fontsize=10)
     path = f"{out_dir}/leo_sensitivity.png"
     fig.savefig(path, dpi=110)
