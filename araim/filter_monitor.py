@@ -247,7 +247,7 @@ def linear_update(x, p, h, z, r_var, used):
 
 def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sat, p_const,
                        budget: IntegrityBudget, max_order: int = 1,
-                       fault_modes: FaultModeRule = DEFAULT_RULE,
+                       fault_modes: str | FaultModeRule = DEFAULT_RULE,
                        iterations: int = PL_ITERATIONS, exclusion: bool = False):
     """The filter bank on a linear model over E epochs (one ``lax.scan``).
 
@@ -306,7 +306,7 @@ def ekf_bank_step(states: _ekf.EkfState, gyro, accel, z, used, tx_pos, tx_clk_m,
 def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m,
                     params: _ekf.EkfParams, constellation, p_sat, p_const,
                     budget: IntegrityBudget, max_order: int = 1,
-                    fault_modes: FaultModeRule = DEFAULT_RULE,
+                    fault_modes: str | FaultModeRule = DEFAULT_RULE,
                     iterations: int = PL_ITERATIONS, exclusion: bool = False):
     """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); inputs as
     ``araim.ekf.run_ekf`` (``gyro``, ``accel`` (E, n, 3); ``z``, ``valid``, ``tx_clk_m`` (E, L);
