@@ -81,6 +81,18 @@ def bench_filter_bank(runs: int = 1000, seed: int = 0, batch: int = 100) -> dict
     return out
 
 
+def filter_bank_rows(fb, host):
+    """The benchmark-table row of a ``bench_filter_bank`` result (``host`` formats its
+    machine and date columns)."""
+    return [("Solution-separation filter bank (seed 000 drive, `sim.simulate_filter_drive`: "
+             f"{fb['bank_filters']} EKFs + the Xi-slope EKF + the snapshot MHSS per epoch)",
+             f"{fb['runs']:,} runs x {fb['epochs_per_run']:,} epochs, batches of {fb['batch']}",
+             f"{fb['filter_bank_wall_s']:.1f} s wall", "-", "-", *host(fb)),
+            ("the plain EKF-RAIM on the same runs (2 EKFs)", f"{fb['runs']:,} runs",
+             f"{fb['ekf_raim_wall_s']:.1f} s wall (the bank costs "
+             f"{fb['cost_ratio_wall']:.1f}x)", "-", "-", *host(fb))]
+
+
 if __name__ == "__main__":
     import json
     import sys
