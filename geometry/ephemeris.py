@@ -611,6 +611,17 @@ def _propagate(params, toe_healthy, toe_unhealthy, sat_ok, t, max_age_s):
             jnp.where(v, tt - g["toe_s"], 0.0))
 
 
+def navigation_file_key(path) -> tuple:
+    """(resolved path, mtime ns, size) of a navigation file: the key of the parse caches; a
+    missing file is a ``NavigationFileError`` in one line."""
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "
+                                  "RINEX 2/3 navigation file (plain or .gz)")
+    st = os.stat(p)
+    return str(p.resolve()), st.st_mtime_ns, st.st_size
+
+
 @functools.lru_cache(maxsize=16)
 def navigation_systems(path_str, mtime_ns, size):
     """The system letters whose records a navigation file holds (its structural check),
@@ -665,19 +676,13 @@ def load_navigation(path: str | os.PathLike | Sequence[str | os.PathLike],
         raise ValueError(f"galileo_source must be None, 'inav' or 'fnav', got {galileo_source!r}")
     tables = []
     for one in paths:
-        p = Path(one).expanduser()
-        if not p.is_file():
-            raise NavigationFileError(f"navigation file {str(one)!r} not found; give an "
-                                      "existing RINEX 2/3 navigation file (plain or .gz)")
-        st = os.stat(p)
+        key = navigation_file_key(one)
         use = systems
         if len(paths) > 1:  # each file keeps the systems it has
-            info = navigation_systems(str(p.resolve()), st.st_mtime_ns, st.st_size)
-            use = tuple(x for x in systems if x in info)
+            use = tuple(x for x in systems if x in navigation_systems(*key))
             if not use:
                 continue
-        tables.append(_parsed_records(str(p.resolve()), st.st_mtime_ns, st.st_size,
-                                      tuple(use)))
+        tables.append(_parsed_records(*key, tuple(use)))
     if not tables:
         raise NavigationFileError(f"{', '.join(str(x) for x in paths)}: no "
                                   f"{'/'.join(systems)} records in any of the files; add the "

@@ -23,7 +23,6 @@ position estimate (``receiver_terms``); the caller iterates them with its solver
 
 import functools
 import os
-from pathlib import Path
 from typing import NamedTuple
 
 import jax
@@ -35,6 +34,7 @@ from oaraim.geometry import atmosphere, gpstime
 from oaraim.geometry.ephemeris import (
     NavigationFileError,
     georinex_navigation,
+    navigation_file_key,
     navigation_systems,
 )
 from oaraim.geometry.frames import (
@@ -86,15 +86,8 @@ def navigation_extras(path) -> NavigationExtras:
     then decides (the replay applies no ionospheric correction and says so).
     """
     if not isinstance(path, (str, os.PathLike)):  # several files: those with GPS records
-        parts = []
-        for one in path:
-            p = Path(one).expanduser()
-            if not p.is_file():
-                raise NavigationFileError(f"navigation file {str(one)!r} not found; give an "
-                                          "existing RINEX 2/3 navigation file (plain or .gz)")
-            st = os.stat(p)
-            if "G" in navigation_systems(str(p.resolve()), st.st_mtime_ns, st.st_size):
-                parts.append(navigation_extras(p))
+        parts = [navigation_extras(one) for one in path
+                 if "G" in navigation_systems(*navigation_file_key(one))]
         if not parts:
             raise NavigationFileError("none of the navigation files holds GPS records; add "
                                       "the GPS (GN or mixed MN) file")
@@ -103,12 +96,7 @@ def navigation_extras(path) -> NavigationExtras:
         return NavigationExtras(ion.alpha, ion.beta,
                                 *(np.concatenate([getattr(x, k) for x in parts])
                                   for k in ("tgd_sv", "tgd_time_s", "tgd_s")))
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise NavigationFileError(f"navigation file {str(path)!r} not found; give an existing "
-                                  "RINEX 2/3 navigation file (plain or .gz)")
-    st = os.stat(p)
-    return _nav_extras(str(p.resolve()), st.st_mtime_ns, st.st_size)
+    return _nav_extras(*navigation_file_key(path))
 
 
 def tgd_at(extras: NavigationExtras, sv, t_gps_s):
