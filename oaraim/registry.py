@@ -27,8 +27,8 @@ STUDY_CLASSES = {
     "integrity-risk": "integrity_risk:IntegrityRisk",
     "tower-placement": "tower_placement:TowerPlacement",
     "sop-requirements": "sop_requirements:SopRequirements",
-    "availability-map-leo": "availability_map.leo_study:AvailabilityMapLeo",
     "leo-sensitivity": "leo_sensitivity:LeoSensitivity",
+    "availability-map-leo": "availability_map.leo_study:AvailabilityMapLeo",
     "filter-integrity": "filter_integrity:FilterIntegrity",
 }
 

@@ -2,11 +2,12 @@
 (``availability-map --set leo=starlink``), a study of its own so that ``oaraim reproduce``
 runs it and its full-size result has a report row.
 
-Its defaults differ from ``availability-map`` in three keys: ``leo=starlink``, the 12 LEO
-satellites of highest elevation above 25 deg, and P_s^LEO = 1e-6. The last is a stated
-choice, not a source's: at P_s^LEO = 1e-5 (GPS's) the ADD's P_thresh rule asks for order 2
-with 30-odd sources (pairs of satellites, ~400 modes), where the MHSS runs at ~40 PL/s and a
-world day would take hours on 2 cores (docs/leo.md, "Cost"); at 1e-6 it stays at order 1.
+Its defaults differ from ``availability-map`` in three keys: ``leo=starlink`` (the 12 LEO
+satellites of highest elevation above 25 deg, the map's defaults), P_s^LEO = 1e-6 and
+P_const^LEO = 1e-5. The last two are stated choices, not a source's: with GPS + Galileo (~22 in view) and 12 LEO
+satellites, MAAST's LPV-200 budget (P_THRES 6e-8) asks the ADD for order 2 unless P_s^LEO
+<= 1e-6 and P_const^LEO <= 3e-5; at order 2 (pairs of satellites, ~400 modes) the MHSS runs
+at ~40 PL/s and the world day took 19 min on 2 shared cores (docs/leo.md, "Cost").
 GPS-only + LEO, the resilience question, is ``--set galileo=none``.
 """
 
@@ -16,7 +17,8 @@ from oaraim.studies.availability_map import AvailabilityMap
 
 
 class AvailabilityMapLeo(AvailabilityMap):
-    """``availability-map`` with ``leo=starlink`` and P_s^LEO = 1e-6 by default."""
+    """``availability-map`` with ``leo=starlink``, P_s^LEO = 1e-6 and P_const^LEO = 1e-5 by
+    default."""
 
     name = "availability-map-leo"
     title = ("ARAIM availability and coverage map with a LEO constellation (Starlink shell 1) "
@@ -26,4 +28,6 @@ class AvailabilityMapLeo(AvailabilityMap):
                   "coastlines": "none"}
     params = {**AvailabilityMap.params,
               "leo": dataclasses.replace(AvailabilityMap.params["leo"], default="starlink"),
-              "p_s_leo": dataclasses.replace(AvailabilityMap.params["p_s_leo"], default=1e-6)}
+              "p_s_leo": dataclasses.replace(AvailabilityMap.params["p_s_leo"], default=1e-6),
+              "p_const_leo": dataclasses.replace(AvailabilityMap.params["p_const_leo"],
+                                                 default=1e-5)}
