@@ -4,10 +4,11 @@ runs it and its full-size result has a report row.
 
 Its defaults differ from ``availability-map`` in three keys: ``leo=starlink`` (the 12 LEO
 satellites of highest elevation above 25 deg, the map's defaults), P_s^LEO = 1e-6 and
-P_const^LEO = 1e-5. The last two are stated choices, not a source's: with GPS + Galileo (~22 in view) and 12 LEO
-satellites, MAAST's LPV-200 budget (P_THRES 6e-8) asks the ADD for order 2 unless P_s^LEO
-<= 1e-6 and P_const^LEO <= 3e-5; at order 2 (pairs of satellites, ~400 modes) the MHSS runs
-at ~40 PL/s and the world day took 19 min on 2 shared cores (docs/leo.md, "Cost").
+P_const^LEO = 1e-5. The last two are stated choices, not a source's: with GPS + Galileo (~22 in
+view) and 12 LEO satellites, MAAST's LPV-200 budget (P_THRES 6e-8) asks the ADD for order 2
+unless P_s^LEO <= 1e-6 and P_const^LEO <= 3e-5; at order 2 (pairs of satellites, ~400 modes)
+the MHSS runs at ~40 PL/s and the world day took 19 min on 2 shared cores (docs/leo.md,
+"Cost").
 GPS-only + LEO, the resilience question, is ``--set galileo=none``.
 """
 
