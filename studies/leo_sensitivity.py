@@ -243,6 +243,8 @@ class LeoSensitivity(ResumableStudy):
                    "nominal GPS + Galileo and the LEO shell")
     default_realizations = 500
     quick_realizations = 128
+    #: the generic study tests: a handful of draws (one is a sky, its LEO and the PL grid)
+    test_realizations = 16
     quick_cost_s = 60
     max_realizations = 20_000
     quick_sets = {"constellations": "starlink", "n_leo": "4", "sigma_ura_leo_m": "1,10",

@@ -132,6 +132,11 @@ SMALL = {"seed001-fig5-madrid-24h": {"duration_h": "1"},
                              "iterations": "3", "starts": "1", "n_candidates": "5",
                              "n_select": "2"},
          # one (n_sops, order) program: 2 SOPs at P_s^S 1e-4 (order 1), a 1 x 1 map
+         # the LEO studies at their quick grids, with the map's small world and day
+         "leo-sensitivity": {"constellations": "starlink", "n_leo": "4",
+                             "sigma_ura_leo_m": "1,10", "p_s_leo": "1e-5"},
+         "availability-map-leo": {"lat_deg": "-35,50", "lon_deg": "0,140",
+                                  "duration_s": "14400", "step_s": "3600"},
          "sop-requirements": {"n_sops": "2", "p_s_sop": "1e-4", "check_p_s": "1e-4",
                               "map_n_sops": "2", "map_sigma_ura_sop_m": "5",
                               "map_p_s_sop": "1e-4"},
