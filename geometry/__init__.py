@@ -104,10 +104,12 @@ from oaraim.geometry.leo import (  # noqa: E402
     combine_skies,
     leo_constellation,
     leo_sky,
+    walker_tle_text,
 )
 
 __all__ += ["LEO_PRESETS", "TleConstellation", "TleFileError", "WalkerConstellation",
-            "WalkerShell", "combine_skies", "leo", "leo_constellation", "leo_sky"]
+            "WalkerShell", "combine_skies", "leo", "leo_constellation", "leo_sky",
+            "walker_tle_text"]
 
 # What the other layers use, through this face only (tools/structure.py: "imports past a
 # package's face"); ``frames`` and ``dual_frequency`` are namespaces.

@@ -296,6 +296,50 @@ def gmst_rad(jd, fr):
     return np.array([gstime(a + b) for a, b in zip(np.ravel(jd), np.ravel(fr), strict=True)])
 
 
+def _brouwer_mean_motion(sat):
+    """SGP4's Brouwer mean motion (rad/min) of a ``Satrec``'s Kozai mean motion (the un-Kozai
+    step of SGP4's initialisation, Hoots and Roehrich, Spacetrack Report No. 3, 1980)."""
+    c2 = np.cos(sat.inclo) ** 2
+    e2 = 1.0 - sat.ecco**2
+    ak = (sat.xke / sat.no_kozai) ** (2.0 / 3.0)
+    d1 = 0.75 * sat.j2 * (3.0 * c2 - 1.0) / (np.sqrt(e2) * e2)
+    de = d1 / ak**2
+    adel = ak * (1.0 - de * de - de * (1.0 / 3.0 + 134.0 * de * de / 81.0))
+    return sat.no_kozai / (1.0 + d1 / adel**2)
+
+
+def walker_tle_text(shell: WalkerShell, epoch_t_gps_s, every=1):
+    """(text of a three-line TLE file, satellite indices (S',)): every ``every``-th satellite
+    of ``shell`` as SGP4 mean elements at ``epoch_t_gps_s`` (GPS seconds) that reproduce our
+    Walker orbit: e = 0, the inclination, the inertial node (node longitude + GMST), mean
+    anomaly = argument of latitude, and the Kozai mean motion whose SGP4 Brouwer mean motion
+    equals our two-body n (fixed point, six passes). SGP4 on this file and
+    ``WalkerConstellation(shell, t)`` for any t give the same Earth-fixed skies at the same
+    offsets from their epochs, within ``SGP4_AGREEMENT_M`` over a day."""
+    from sgp4 import exporter
+    from sgp4.api import WGS72, Satrec
+
+    node, u = walker_elements(shell)
+    inc = np.deg2rad(shell.inclination_deg)
+    n = np.sqrt(WGS84_GM_M3_S2 / shell.a_m**3) * 60.0  # rad/min
+    jd, fr = julian_utc(float(epoch_t_gps_s))
+    theta = gmst_rad(jd, fr)[0]
+    epoch = float(jd + fr - 2433281.5)  # SGP4's epoch: days from 1949-12-31 00:00 UT
+    idx = np.arange(0, shell.total, int(every))
+    lines = []
+    for i in idx:
+        n_kozai = n
+        for _ in range(6):
+            sat = Satrec()
+            sat.sgp4init(WGS72, "i", int(i) + 1, epoch, 0.0, 0.0, 0.0, 0.0, 0.0, inc,
+                         float(np.mod(u[i], 2 * np.pi)), n_kozai,
+                         float(np.mod(node[i] + theta, 2 * np.pi)))
+            n_kozai *= n / _brouwer_mean_motion(sat)
+        l1, l2 = exporter.export_tle(sat)
+        lines += [f"{shell.name.upper()} {i}", l1, l2]
+    return "\n".join(lines) + "\n", idx
+
+
 def leo_constellation(spec, epoch_t_gps_s=None, j2=True):
     """The orbits object of ``spec``: a preset name (``LEO_PRESETS``), a ``WalkerShell``, or
     a TLE file path. Walker shells are placed at ``epoch_t_gps_s`` (default: the GPS origin);

@@ -4,8 +4,6 @@ TLEs of the same mean elements), the Walker pattern against the nominal Galileo 
 
 import numpy as np
 import pytest
-from sgp4 import exporter
-from sgp4.api import WGS72, Satrec
 
 import oaraim  # noqa: F401  (float64)
 from oaraim import geometry
@@ -14,42 +12,10 @@ from oaraim.geometry import gpstime, leo
 T0 = float(gpstime.gps_seconds(2025, 3, 1))
 
 
-def _unkozai(s):
-    """SGP4's Brouwer mean motion (rad/min) of a Satrec's Kozai mean motion (the five lines
-    of SGP4's initl)."""
-    c2 = np.cos(s.inclo) ** 2
-    e2 = 1.0 - s.ecco**2
-    ak = (s.xke / s.no_kozai) ** (2.0 / 3.0)
-    d1 = 0.75 * s.j2 * (3.0 * c2 - 1.0) / (np.sqrt(e2) * e2)
-    de = d1 / ak**2
-    adel = ak * (1.0 - de * de - de * (1.0 / 3.0 + 134.0 * de * de / 81.0))
-    return s.no_kozai / (1.0 + d1 / adel**2)
-
-
 def write_equivalent_tles(shell, t0, path, every):
-    """A TLE file of every ``every``-th satellite of ``shell`` at epoch t0: e = 0, the
-    inclination, the inertial node (node longitude + GMST), mean anomaly = argument of
-    latitude, and the Kozai mean motion whose Brouwer value is our two-body n. Returns the
-    satellite indices."""
-    node, u = leo.walker_elements(shell)
-    inc = np.deg2rad(shell.inclination_deg)
-    n = np.sqrt(leo.WGS84_GM_M3_S2 / shell.a_m**3) * 60.0  # rad/min
-    jd, fr = leo.julian_utc(t0)
-    theta = leo.gmst_rad(jd, fr)[0]
-    epoch = float(jd + fr - 2433281.5)  # days from 1949-12-31 00:00 UT
-    idx = np.arange(0, shell.total, every)
-    lines = []
-    for i in idx:
-        nk = n
-        for _ in range(6):
-            s = Satrec()
-            s.sgp4init(WGS72, "i", int(i) + 1, epoch, 0.0, 0.0, 0.0, 0.0, 0.0, inc,
-                       float(np.mod(u[i], 2 * np.pi)), nk,
-                       float(np.mod(node[i] + theta, 2 * np.pi)))
-            nk *= n / _unkozai(s)
-        l1, l2 = exporter.export_tle(s)
-        lines += [f"{shell.name.upper()} {i}", l1, l2]
-    path.write_text("\n".join(lines) + "\n")
+    """The TLE file of ``geometry.leo.walker_tle_text`` at ``path``; its satellite indices."""
+    text, idx = leo.walker_tle_text(shell, t0, every)
+    path.write_text(text)
     return idx
 
 
