@@ -225,7 +225,7 @@ class SopRequirements(ResumableStudy):
         """Newton roots per (n, P_s^S), Fig. 4's grid boundary at ``check_p_s``, the
         sensitivity maps. Units (``checkpoint``): each root, each grid boundary, each map row
         (one n and P_s^S), every one a value with the evaluations it cost."""
-        from oaraim.studies.sop_requirements_report import finish
+        from oaraim.studies.sop_requirements_report import RequirementsOutcome, finish
 
         d = self.draws(params, realizations, seed)
         cells = {}
@@ -267,8 +267,8 @@ class SopRequirements(ResumableStudy):
                 sens[:, i, j], _ = counted("map", n, p, lambda cl: np.array(
                     [cl.sensitivities(s) for s in ms]).T)
         _advance(progress, realizations - realizations // 2)
-        return finish(params, d, realizations, roots, steps, evals_newton, bound, evals_grid,
-                      sens)
+        return finish(params, d, realizations, RequirementsOutcome(
+            roots, steps, evals_newton, bound, evals_grid, sens))
 
     def plot(self, out_dir):
         """sop_requirements.png (the roots against P_s^S beside Fig. 4's grid boundary) and

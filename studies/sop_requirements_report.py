@@ -1,5 +1,7 @@
 """The ``sop-requirements`` study's results: dataset, summary rows and figures."""
 
+from typing import NamedTuple
+
 import numpy as np
 import xarray as xr
 
@@ -21,9 +23,27 @@ def within_one_step(root, bound, grid=c.SIGMA_GRID_M):
     return ok | none
 
 
-def finish(params, d, realizations, roots, steps, evals_newton, bound, evals_grid, sens):
-    """The ``StudyResult`` of ``studies.sop_requirements`` from its roots, grid boundaries and
-    sensitivity maps."""
+class RequirementsOutcome(NamedTuple):
+    """What a run of ``studies.sop_requirements`` computed, the input of ``finish``."""
+
+    roots: np.ndarray
+    """(n_sops, p_s_sop) m: the largest sigma_URA^S that still reduces the HPL (Newton)."""
+    steps: np.ndarray
+    """(n_sops, p_s_sop): Newton steps per root."""
+    evals_newton: int
+    """Evaluations the roots cost."""
+    bound: np.ndarray
+    """(n_sops, check_p_s) m: Fig. 4's grid boundary."""
+    evals_grid: int
+    """Evaluations the grid boundaries cost."""
+    sens: np.ndarray
+    """(3, map_n_sops, map_p_s_sop, map_sigma_ura_sop_m): mean HPL m and its derivatives."""
+
+
+def finish(params, d, realizations, outcome: RequirementsOutcome):
+    """The ``StudyResult`` of ``studies.sop_requirements`` from its ``outcome``: roots, grid
+    boundaries and sensitivity maps."""
+    roots, steps, evals_newton, bound, evals_grid, sens = outcome
     ns, ps, cps = params["n_sops"], params["p_s_sop"], params["check_p_s"]
     jc = [int(np.argmin(np.abs(np.log(np.asarray(ps)) - np.log(p)))) for p in cps]
     matched = np.isclose(np.asarray(ps)[jc], cps, rtol=1e-9)

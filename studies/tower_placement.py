@@ -402,7 +402,7 @@ class TowerPlacement(ResumableStudy):
         exhaustive selection among the candidates, refinement; maps for the figures. Units
         (``checkpoint``): the random baseline, each start, greedy, exhaustive, refinement,
         maps."""
-        from oaraim.studies.tower_placement_report import finish, median_index
+        from oaraim.studies.tower_placement_report import PlacementOutcome, finish, median_index
 
         sky = c.gps_sky_table(params["nav"], params["mask_deg"], params["sky_step_s"])
         prob = Problem(params, sky)
@@ -438,8 +438,8 @@ class TowerPlacement(ResumableStudy):
              "random_median": prob.hpl_map(rand[median_index(q_rand)], every, box),
              "optimised": prob.hpl_map(free[0], every, box)},
             float(prob.score(prob.hpls(none[0][None], none[1][None]))[0])))
-        return finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy,
-                      swaps, exh, refined, maps, q_gps)
+        return finish(params, sky, prob, PlacementOutcome(
+            rand, q_rand, runs, free, sites, greedy, q_greedy, swaps, exh, refined, maps, q_gps))
 
     @staticmethod
     def sites(params, key):

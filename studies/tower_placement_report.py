@@ -1,9 +1,42 @@
 """The ``tower-placement`` study's results: dataset, summary rows and figures."""
 
+from typing import NamedTuple
+
 import numpy as np
 import xarray as xr
 
 from oaraim.studies.base import StudyResult
+
+
+class PlacementOutcome(NamedTuple):
+    """What a run of ``studies.tower_placement`` computed, the input of ``finish``."""
+
+    rand: np.ndarray
+    """(placements, towers, 3) ENU m: the random placements."""
+    q_rand: np.ndarray
+    """(placements,): their objective."""
+    runs: list
+    """One ``descend`` per start: (towers, objective, surrogate and objective per
+    iteration)."""
+    free: tuple
+    """The best of ``runs``."""
+    sites: np.ndarray
+    """(sites, 3) ENU m: the candidate sites."""
+    greedy: np.ndarray
+    """Indices of the sites greedy + swap selected."""
+    q_greedy: float
+    """Their objective."""
+    swaps: list
+    """The greedy + swap history."""
+    exh: tuple | None
+    """The exhaustive search (best indices, best objective, every subset's objective), None
+    when there were more subsets than the limit."""
+    refined: tuple
+    """The ``descend`` of the greedy selection within its refinement radius."""
+    maps: dict
+    """{name: (north, east) HPL map m} for the figures."""
+    q_gps: float
+    """The objective of GPS alone."""
 
 
 def median_index(q):
@@ -11,10 +44,11 @@ def median_index(q):
     return int(np.argsort(q, kind="stable")[len(q) // 2])
 
 
-def finish(params, sky, prob, rand, q_rand, runs, free, sites, greedy, q_greedy, swaps, exh,
-           refined, maps, q_gps):
+def finish(params, sky, prob, outcome: PlacementOutcome):
     """The ``StudyResult`` of a run of ``studies.tower_placement`` (its ``run`` computes the
-    arguments: random placements and their objective, the descents, the selections, maps)."""
+    ``outcome``: random placements and their objective, the descents, the selections, maps)."""
+    (rand, q_rand, runs, free, sites, greedy, q_greedy, swaps, exh, refined, maps,
+     q_gps) = outcome
     n_it = params["iterations"]
     box = params["box_half_m"]
     i_med = median_index(q_rand)
