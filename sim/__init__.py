@@ -29,6 +29,7 @@ from oaraim.sim.drive import (
 )
 from oaraim.sim.gnss import (
     GnssErrorModel,
+    SnapshotWorld,
     epoch_times,
     gnss_errors,
     gnss_sop_errors,
@@ -38,7 +39,10 @@ from oaraim.sim.gnss import (
 )
 from oaraim.sim.measurement import (
     EpochMeasurements,
+    EpochTowers,
+    EpochTruth,
     ErrorModel,
+    ReceiverSensors,
     WorldState,
     calibrate,
     clock_fit,
@@ -61,14 +65,15 @@ from oaraim.sim.trajectory import (
 )
 
 __all__ = [
-    "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "ErrorModel", "GnssErrorModel",
-    "InitialDraw", "SCENARIOS", "Scenario", "Segment", "Trajectory", "WorldState", "calibrate",
+    "DriveSetup", "DriveSummary", "DriveTrace", "EpochMeasurements", "EpochTowers",
+    "EpochTruth", "ErrorModel", "GnssErrorModel", "InitialDraw", "ReceiverSensors", "SCENARIOS",
+    "Scenario", "Segment", "SnapshotWorld", "Trajectory", "WorldState", "calibrate",
     "clock_fit", "drive", "drive_epoch", "drive_seed000", "drive_seed002", "drive_setup",
-    "epoch_times", "example_recording", "fault_bias_m", "gnss", "gnss_errors", "gnss_sop_errors",
-    "initial_draw", "measurement", "monte_carlo_drive", "pseudorange_from_range",
-    "pseudorange_sample", "pseudorange_true", "pseudoranges", "recordings", "scenario_geometry",
-    "simulate_drive", "sop_errors", "synthesize_recording", "to_recording", "trajectory",
-    "uav_seed004",
+    "epoch_times", "example_recording", "fault_bias_m", "gnss", "gnss_errors",
+    "gnss_sop_errors", "initial_draw", "measurement", "monte_carlo_drive",
+    "pseudorange_from_range", "pseudorange_sample", "pseudorange_true", "pseudoranges",
+    "recordings", "scenario_geometry", "simulate_drive", "sop_errors", "synthesize_recording",
+    "to_recording", "trajectory", "uav_seed004",
 ]
 
 from oaraim.sim import faults, filter_drive  # noqa: E402

@@ -28,7 +28,15 @@ from oaraim.araim.ekf_raim import (
 )
 from oaraim.geometry import clocks, imu
 from oaraim.sim import trajectory
-from oaraim.sim.measurement import ErrorModel, WorldState, calibrate, drive_epoch
+from oaraim.sim.measurement import (
+    EpochTowers,
+    EpochTruth,
+    ErrorModel,
+    ReceiverSensors,
+    WorldState,
+    calibrate,
+    drive_epoch,
+)
 
 
 class DriveSummary(NamedTuple):
@@ -84,6 +92,12 @@ class DriveSetup(NamedTuple):
     tables: RaimTables
     operator: jnp.ndarray     # (L,) each tower's operator 0..L-1 (its common clock term)
     calib_t_s: jnp.ndarray    # (n_cal,) epochs of the GNSS period, the last at t = 0
+
+    def sensors(self) -> ReceiverSensors:
+        """The world's IMU (``spec``, the IMU step) and receiver clock PSDs, those of the
+        receiver's model ``params``: what ``sim.measurement.drive_epoch`` draws from."""
+        p = self.params
+        return ReceiverSensors(self.spec, p.dt_s, p.s_wdt_s, p.s_wdtdot_per_s)
 
 
 def drive_setup(scenario: trajectory.Scenario, spec: imu.ImuSpec | None = None,
@@ -192,7 +206,7 @@ def simulate_drive(key, setup: DriveSetup, err: ErrorModel | None = None, filter
     quantity at every epoch."""
     err = ErrorModel() if err is None else err
     fault_tower, fault_onset_s = err.fault_tower, err.fault_onset_s
-    sp, p = setup.spec, setup.params
+    p = setup.params
     n_t = setup.towers.shape[0]
     d = initial_draw(key, setup, err)
     sigma_f = filter_sigma(d, err, filter_sigma_pr_m)
@@ -205,9 +219,10 @@ def simulate_drive(key, setup: DriveSetup, err: ErrorModel | None = None, filter
     def body(c, inp):
         world, filt = c
         e, g_true, a_true, t_e, pos_e, vel_e, q_e, tclk = inp
-        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world, g_true, a_true, t_e,
-                               pos_e, setup.towers, tclk, err, sp, p.dt_s, p.s_wdt_s,
-                               p.s_wdtdot_per_s, operator=setup.operator)
+        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world,
+                               EpochTruth(g_true, a_true, t_e, pos_e),
+                               EpochTowers(setup.towers, tclk, setup.operator), err,
+                               setup.sensors())
         valid = jnp.ones(n_t, bool)
 
         def one_filter(cf, excl):

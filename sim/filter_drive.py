@@ -29,7 +29,7 @@ from oaraim.araim import ekf as _ekf
 from oaraim.araim.ekf_raim import raim_init, raim_update
 from oaraim.sim.drive import DriveSetup, filter_sigma, initial_draw
 from oaraim.sim.faults import FaultScenario, fault_profile_m
-from oaraim.sim.measurement import ErrorModel, drive_epoch
+from oaraim.sim.measurement import EpochTowers, EpochTruth, ErrorModel, drive_epoch
 
 __all__ = ["DEFAULT_CONFIG", "MONITORS", "FilterDriveConfig", "FilterDriveSummary",
            "FilterDriveTrace", "gm_overbound_variance", "simulate_filter_drive"]
@@ -136,9 +136,10 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
     def body(c, inp):
         world, bank, xi = c
         e, g_true, a_true, t_e, pos_e, tclk = inp
-        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world, g_true, a_true, t_e,
-                               pos_e, setup.towers, tclk, err, setup.spec, p.dt_s, p.s_wdt_s,
-                               p.s_wdtdot_per_s, operator=setup.operator)
+        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world,
+                               EpochTruth(g_true, a_true, t_e, pos_e),
+                               EpochTowers(setup.towers, tclk, setup.operator), err,
+                               setup.sensors())
         bias = fault_profile_m(t_e, fault, n_t)
         z = m.pseudorange_m + bias
         # the solution-separation bank

@@ -130,13 +130,27 @@ def gnss_errors(key, t_s, el_rad, sigma_ura_m, gm: GnssErrorModel):
     return y
 
 
-def gnss_sop_errors(key, t_s, el_rad, is_gps, sigma_ura_gps_m, err: ErrorModel, t_cal_s,
-                    operator=None, gm: GnssErrorModel | None = None):
+class SnapshotWorld(NamedTuple):
+    """The error world of a GNSS + SOP snapshot scenario (``gnss_sop_errors``)."""
+
+    sop: ErrorModel
+    """The towers' world (``sim.sop_errors``)."""
+    t_cal_s: jax.Array
+    """(n_cal,) s: the GNSS period's epochs, before t = 0, in which the towers' clocks are
+    fitted."""
+    operator: jax.Array | None = None
+    """(L_towers,) int: each tower's operator (its common clock term); None: all one."""
+    gnss: GnssErrorModel | None = None
+    """The satellites' world; None: ``GnssErrorModel()``."""
+
+
+def gnss_sop_errors(key, t_s, el_rad, is_gps, sigma_ura_gps_m, world: SnapshotWorld):
     """Pseudorange errors (T, L) of a GNSS + SOP scenario in the realistic world, and the SOPs'
-    empirical sigma of the GNSS period (m): ``gnss_errors`` (``gm``, ``sigma_ura_gps_m``) on
-    the GNSS columns (``is_gps``, a static (L,) bool), ``sop_errors`` (``err``, the GNSS period
-    ``t_cal_s``, towers' ``operator``) on the others in column order, both from ``key``
-    (``gm`` None: ``GnssErrorModel()``). jit-safe."""
+    empirical sigma of the GNSS period (m): ``gnss_errors`` (``world.gnss``,
+    ``sigma_ura_gps_m``) on the GNSS columns (``is_gps``, a static (L,) bool), ``sop_errors``
+    (``world.sop``, the GNSS period ``world.t_cal_s``, the towers' ``world.operator``) on the
+    others in column order, both from ``key``. jit-safe."""
+    err, t_cal_s, operator, gm = world
     gm = GnssErrorModel() if gm is None else gm
     is_gps = np.asarray(is_gps, bool)
     towers = np.flatnonzero(~is_gps)

@@ -302,22 +302,60 @@ def n_epoch_normals(n_imu: int, n_towers: int) -> int:
     return n_imu * 12 + 2 + 2 * n_towers
 
 
-def drive_epoch(key, state: WorldState, gyro_true, accel_true, t_s, pos_m, towers_m,
-                tower_clk_m, err: ErrorModel, spec: imu.ImuSpec, dt_imu_s, s_wdt_s,
-                s_wdtdot_per_s, unrolled_imu=False, operator=None):
+class EpochTruth(NamedTuple):
+    """The truth of one drive epoch (``drive_epoch``)."""
+
+    gyro_rad_s: jax.Array
+    """(n, 3) rad/s: the ideal interval-mean body rates of the epoch's n IMU intervals."""
+    accel_m_s2: jax.Array
+    """(n, 3) m/s^2: the ideal interval-mean specific forces."""
+    t_s: jax.Array
+    """() s: the epoch's time."""
+    pos_m: jax.Array
+    """(3,) m: the receiver's position at the epoch (the towers' frame)."""
+
+
+class EpochTowers(NamedTuple):
+    """The towers one drive epoch ranges to (``drive_epoch``)."""
+
+    pos_m: jax.Array
+    """(L, 3) m: the towers' positions."""
+    clock_m: jax.Array
+    """(L,) m: the towers' calibrated clock polynomials at the epoch."""
+    operator: jax.Array | None = None
+    """(L,) int: each tower's operator 0..L-1 (its common clock term); None: all one."""
+
+
+class ReceiverSensors(NamedTuple):
+    """The receiver's IMU and clock in the simulated world (``drive_epoch``)."""
+
+    spec: imu.ImuSpec
+    """The IMU's error specification."""
+    dt_imu_s: float
+    """s: the IMU step."""
+    s_wdt_s: float
+    """The receiver clock's bias PSD (``geometry.clocks``)."""
+    s_wdtdot_per_s: float
+    """The receiver clock's drift PSD."""
+
+
+def drive_epoch(key, state: WorldState, truth: EpochTruth, towers: EpochTowers,
+                err: ErrorModel, sensors: ReceiverSensors, unrolled_imu=False):
     """One pseudorange epoch of a simulated drive: the IMU samples of its n intervals, the
     receiver clock and SOP error steps (``sop_step``), and the pseudoranges at the epoch's end.
 
     ``key`` is the epoch's key (one normal vector of ``n_epoch_normals`` is drawn from it, the
-    other SOP errors from its named streams); ``gyro_true``/``accel_true`` (n, 3) the ideal
-    interval means; ``pos_m`` (3,) the truth at the epoch; ``towers_m`` (L, 3);
-    ``tower_clk_m`` (L,) the towers' calibrated clock polynomials; ``operator`` (L,) each
-    tower's operator 0..L-1 (default all one); ``dt_imu_s`` the IMU step and ``s_wdt_s``,
-    ``s_wdtdot_per_s`` the receiver clock's PSDs. ``unrolled_imu`` (static) writes the IMU
+    other SOP errors from its named streams); ``truth`` the ideal IMU interval means and the
+    position at the epoch (``EpochTruth``); ``towers`` their positions, calibrated clock
+    polynomials and operators (``EpochTowers``); ``sensors`` the IMU spec and step and the
+    receiver clock's PSDs (``ReceiverSensors``). ``unrolled_imu`` (static) writes the IMU
     chain as a Python loop instead of a ``lax.scan``: the same equations; XLA may round the two
     forms differently in the last bit, and the one-run synthesis keeps the loop so that
     synthesized recordings stay bit-identical to earlier versions. Returns
     ``(WorldState, EpochMeasurements)``."""
+    gyro_true, accel_true, t_s, pos_m = truth
+    towers_m, tower_clk_m, operator = towers
+    spec, dt_imu_s, s_wdt_s, s_wdtdot_per_s = sensors
     n_sub = gyro_true.shape[0]
     n_t = towers_m.shape[0]
     operator = jnp.zeros(n_t, int) if operator is None else operator

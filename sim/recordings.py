@@ -18,7 +18,7 @@ from oaraim.araim.ekf_raim import InitialUncertainty
 from oaraim.constants import C_M_S
 from oaraim.geometry import frames, imu, recording
 from oaraim.sim.drive import DriveSetup, drive_setup, filter_sigma, initial_draw
-from oaraim.sim.measurement import ErrorModel, drive_epoch
+from oaraim.sim.measurement import EpochTowers, EpochTruth, ErrorModel, drive_epoch
 from oaraim.sim.trajectory import Scenario
 
 
@@ -27,14 +27,14 @@ def _synth(key, setup: DriveSetup, err: ErrorModel, filter_sigma_pr_m=0.0):
     """The draws of ``simulate_drive`` for ``key`` (``initial_draw``, then ``drive_epoch`` on
     ``fold_in(epoch key, e)``): IMU samples, receiver clock, pseudoranges and their bias per
     epoch, the initial estimate, the initial receiver clock and the filter's sigma."""
-    p = setup.params
     d = initial_draw(key, setup, err)
 
     def body(world, inp):
         e, g_true, a_true, t_e, pos_e, tclk = inp
-        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world, g_true, a_true, t_e,
-                               pos_e, setup.towers, tclk, err, setup.spec, p.dt_s, p.s_wdt_s,
-                               p.s_wdtdot_per_s, unrolled_imu=True, operator=setup.operator)
+        world, m = drive_epoch(jax.random.fold_in(d.epoch_key, e), world,
+                               EpochTruth(g_true, a_true, t_e, pos_e),
+                               EpochTowers(setup.towers, tclk, setup.operator), err,
+                               setup.sensors(), unrolled_imu=True)
         return world, (m.gyro_rad_s, m.accel_m_s2, m.pseudorange_m, world.rx_clock_m, m.bias_m)
 
     n_ep = setup.t_s.shape[0]
@@ -45,20 +45,18 @@ def _synth(key, setup: DriveSetup, err: ErrorModel, filter_sigma_pr_m=0.0):
 
 
 def synthesize_recording(scenario: Scenario, key, *, err: ErrorModel | None = None,
-                         filter_sigma_pr_m: float = 0.0, sigma_pr_m: float | None = None,
-                         mp_sigma_m: float | None = None, mp_tau_s: float | None = None,
-                         fault_tower: int | None = None, fault_onset_s: float | None = None,
-                         fault_bias_m: float | None = None, spec: imu.ImuSpec | None = None,
+                         filter_sigma_pr_m: float = 0.0, spec: imu.ImuSpec | None = None,
                          init_uncertainty: InitialUncertainty | None = None,
                          duration_s: float | None = None) -> recording.Recording:
     """One run of ``scenario`` in the error world ``err`` as a validated ``Recording``. ``err``
-    None: the realistic ``ErrorModel()`` with the scenario's fault; the keyword arguments
-    ``sigma_pr_m`` ... ``fault_bias_m``, where given, replace those fields. The draws are those
-    of ``sim.simulate_drive(key, setup, err, filter_sigma_pr_m)``: the same IMU samples, clock,
-    SOP errors, pseudoranges and initial estimate error, and the pseudoranges' ``sigma_m`` is
-    the filter's sigma of that run (``sim.drive.filter_sigma``: the empirical one unless
-    ``filter_sigma_pr_m`` > 0), so replaying the recording reproduces that run (up to the
-    ENU -> ECEF -> ENU round trip, ~1e-9 m).
+    None: the realistic ``ErrorModel()`` with the scenario's fault; another world (a thermal
+    noise, multipath or fault of its own) is an ``ErrorModel`` with those fields replaced
+    (``sim.ErrorModel(fault_tower=scenario.fault_tower, ...)._replace(sigma_pr_m=2.0)``). The
+    draws are those of ``sim.simulate_drive(key, setup, err, filter_sigma_pr_m)``: the same IMU
+    samples, clock, SOP errors, pseudoranges and initial estimate error, and the pseudoranges'
+    ``sigma_m`` is the filter's sigma of that run (``sim.drive.filter_sigma``: the empirical
+    one unless ``filter_sigma_pr_m`` > 0), so replaying the recording reproduces that run (up
+    to the ENU -> ECEF -> ENU round trip, ~1e-9 m).
 
     Tables: imu (100 Hz, stamps at the end of each interval-mean sample), transmitters (ECEF,
     clock polynomials c dt = bias + drift t), pseudoranges (10 Hz, ``sigma_m``), truth at t = 0
@@ -70,9 +68,6 @@ def synthesize_recording(scenario: Scenario, key, *, err: ErrorModel | None = No
     if err is None:
         err = ErrorModel(fault_tower=sc.fault_tower, fault_onset_s=sc.fault_onset_s,
                          fault_bias_m=sc.fault_bias_m)
-    given = dict(sigma_pr_m=sigma_pr_m, mp_sigma_m=mp_sigma_m, mp_tau_s=mp_tau_s,
-                 fault_tower=fault_tower, fault_onset_s=fault_onset_s, fault_bias_m=fault_bias_m)
-    err = err._replace(**{k: v for k, v in given.items() if v is not None})
     kw = {k: (int(v) if k == "fault_tower" else float(v)) for k, v in err._asdict().items()}
     setup = drive_setup(sc, spec, init_uncertainty, duration_s=duration_s)
     gm, am, z, clk, bias, est, clk0, sig_f = jax.device_get(

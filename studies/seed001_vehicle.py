@@ -77,7 +77,7 @@ def world_noise_fn(geom, params, seed):
 
     def one(i):
         return sim.gnss_sop_errors(jax.random.fold_in(seed_key, i), t, el, is_gps,
-                                   params["sigma_ura_gps_m"], err, t_cal)
+                                   params["sigma_ura_gps_m"], sim.SnapshotWorld(err, t_cal))
 
     return jax.jit(jax.vmap(one))
 

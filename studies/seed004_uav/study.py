@@ -151,9 +151,9 @@ def world_errors(geom, params, seed):
                            calib_window_s=params["calib_window_s"])
     t_s = jnp.asarray(geom.t_s)
     t_cal_s = -jnp.arange(GNSS_PERIOD_EPOCHS, dtype=t_s.dtype)[::-1]
-    err, sigma_emp_m = sim.gnss_sop_errors(key, t_s, jnp.asarray(geom.el_rad), geom.is_gps,
-                                           params["sigma_ura_gps_m"], world, t_cal_s,
-                                           jnp.asarray(operator))
+    err, sigma_emp_m = sim.gnss_sop_errors(
+        key, t_s, jnp.asarray(geom.el_rad), geom.is_gps, params["sigma_ura_gps_m"],
+        sim.SnapshotWorld(world, t_cal_s, jnp.asarray(operator)))
     return np.where(geom.valid, np.asarray(err), 0.0), float(sigma_emp_m)
 
 
