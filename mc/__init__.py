@@ -11,7 +11,7 @@ from oaraim.mc.keys import STREAMS, realization_keys, stream
 from oaraim.mc.reduce import BLOCK, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import ChunkPlan, run_chunked
 from oaraim.mc.store import provenance, read_summary, write_json, write_results
-from oaraim.mc.sweep import Axis, Execution, Storage, SweepResult, run_sweep
+from oaraim.mc.sweep import Axis, Draws, Execution, Storage, SweepResult, run_sweep
 
 # One reducer family (mc.reduce) serves sweeps (mc.sweep re-exports it) and streamed chunks.
 
@@ -21,6 +21,7 @@ __all__ = [
     "Axis",
     "ChunkPlan",
     "Count",
+    "Draws",
     "EmpiricalCDF",
     "Execution",
     "Histogram",

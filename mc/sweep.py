@@ -58,6 +58,7 @@ from oaraim.mc.keys import MAX_REALIZATIONS, check_seed
 from oaraim.mc.reduce import BLOCK, REDUCERS, Count, EmpiricalCDF, Histogram, Max, Mean, Min, Values
 from oaraim.mc.runner import DEFAULT_CHUNK
 from oaraim.mc.sweep_backends import (
+    ChunkTask,
     WarmAhead,
     check_scheduler,
     compute_chunk,
@@ -79,10 +80,30 @@ from oaraim.mc.sweep_store import (
 from oaraim.mc.sweep_store import normalized as _normalized
 
 __all__ = [
-    "CHUNK_DIR", "MANIFEST", "REDUCERS", "Axis", "Count", "EmpiricalCDF", "Execution", "Histogram",
-    "Max", "Mean", "Min", "Storage", "SweepResult", "Values", "canonical", "cell_key_id",
-    "check_scheduler", "compute_chunk", "kernel_outputs", "run_sweep",
+    "CHUNK_DIR", "MANIFEST", "REDUCERS", "Axis", "ChunkTask", "Count", "Draws", "EmpiricalCDF",
+    "Execution", "Histogram", "Max", "Mean", "Min", "Storage", "SweepResult", "Values",
+    "canonical", "cell_key_id", "check_scheduler", "compute_chunk", "kernel_outputs",
+    "run_sweep",
 ]
+
+
+class Draws(NamedTuple):
+    """What a sweep draws in each cell: all of it is part of the run's identity (a resume must
+    match it).
+
+    Attributes:
+      realizations: draws per cell.
+      seed: study seed.
+      key_axes: axes whose values change the draws; the others reuse them.
+      batch_size: keys per kernel call, the one shape the kernel is compiled for (a multiple
+        of BLOCK). XLA may round differently at another batch size, so a resume must use the
+        same.
+    """
+
+    realizations: int
+    seed: int
+    key_axes: tuple = ()
+    batch_size: int = BLOCK
 
 
 class Storage(NamedTuple):
@@ -222,31 +243,30 @@ def _missing_runs(covered: np.ndarray):
     return runs
 
 
-def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, seed: int,
-              storage: Storage, key_axes=(), batch_size: int = BLOCK,
+def run_sweep(kernel_factory: Callable, axes, reducers, draws: Draws, *, storage: Storage,
               execution: Execution | None = None, progress: bool = True,
               description: str = "") -> SweepResult:
-    """Run every cell of the grid ``axes`` for ``realizations`` draws and reduce.
+    """Run every cell of the grid ``axes`` for ``draws.realizations`` draws and reduce.
 
     Args:
       kernel_factory: picklable ``coords -> kernel`` (``coords``: dict axis name -> value);
         ``kernel(keys)`` maps a ``(batch_size,)`` key array to a dict of ``(batch_size,)``
         arrays. Built once per cell and process.
       axes: ``Axis`` objects, in grid order.
-      realizations: draws per cell.
       reducers: ``Mean``, ``Max``, ``Min``, ``Histogram``, ``EmpiricalCDF``, ``Count``,
         ``Values`` of kernel outputs (``mc.reduce``).
-      seed: study seed.
+      draws: a ``Draws``: realizations per cell, the study seed, the axes whose values change
+        the draws (``key_axes``) and the keys per kernel call (``batch_size``).
       storage: a ``Storage``: the output folder, the run's fingerprint, resume or not.
-      key_axes: axes whose values change the draws; the others reuse them.
-      batch_size: keys per kernel call, the one shape the kernel is compiled for (a multiple
-        of BLOCK). Part of the run's identity: XLA may round differently at another batch
-        size, so a resume must use the same.
       execution: an ``Execution``: host threads, or Dask workers or scheduler, and the chunk
         size (default: in-process, ``OARAIM_THREADS`` threads, ``DEFAULT_CHUNK``).
       progress: show one bar (cells, realizations/s, ETA) and a final line on stderr.
       description: label of the bar.
     """
+    if not isinstance(draws, Draws):
+        raise TypeError(f"draws must be an mc.sweep.Draws(realizations, seed, key_axes, "
+                        f"batch_size), got {draws!r}")
+    realizations, seed, key_axes, batch_size = draws
     t0 = time.perf_counter()
     axes = tuple(axes)
     reducers = tuple(reducers)
@@ -355,7 +375,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
     def args_of(task):
         ci, b0, nb = task
         c = cells[ci]
-        return c.coords, c.key_id, int(seed), b0, nb, realizations, batch_size, reducers
+        return ChunkTask(c.coords, c.key_id, int(seed), b0, nb, realizations, batch_size, reducers)
 
     with bar:
         if tasks and distributed:
@@ -382,7 +402,7 @@ def run_sweep(kernel_factory: Callable, axes, realizations: int, reducers, *, se
                     run_threads(tasks, kernel_of, args_of, finished, threads)
                 else:
                     for task in tasks:
-                        finished(task, compute_chunk(kernel_of(task), *args_of(task)))
+                        finished(task, compute_chunk(kernel_of(task), args_of(task)))
         if not covered.all():  # cannot happen: every missing block had a task
             raise RuntimeError("internal error: some blocks of the sweep were never computed")
 

@@ -6,6 +6,7 @@ import collections
 import logging
 import socket
 import threading
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -68,13 +69,36 @@ def kernel_outputs(kernel, key_id, seed, start, n, batch_size):
             for name in parts[0]}
 
 
-def compute_chunk(kernel, coords, key_id, seed, b0, nblocks, realizations, batch_size,
-                  reducers):
-    """Partial statistics of blocks ``b0 .. b0 + nblocks - 1`` of one cell.
+class ChunkTask(NamedTuple):
+    """One chunk of one cell of a sweep: what ``compute_chunk`` computes (picklable, so a Dask
+    task carries it)."""
+
+    coords: dict
+    """The cell: axis name -> value."""
+    key_id: int
+    """The cell's key index (``mc.keys.cell_key``; cells that differ only in axes that do not
+    change the draws share it)."""
+    seed: int
+    """The study seed."""
+    b0: int
+    """The chunk's first block (of ``BLOCK`` realizations)."""
+    nblocks: int
+    """Its blocks."""
+    realizations: int
+    """Realizations per cell: outputs past the last one are excluded."""
+    batch_size: int
+    """Keys per kernel call (the compiled shape)."""
+    reducers: tuple
+    """The sweep's reducers (``mc.reduce``)."""
+
+
+def compute_chunk(kernel, chunk: ChunkTask):
+    """Partial statistics of blocks ``chunk.b0 .. chunk.b0 + chunk.nblocks - 1`` of one cell.
 
     The kernel sees ``batch_size`` keys per call (``kernel_outputs``); outputs past the cell's
     last realization are excluded. Returns ``{"r{i}.{field}": array}`` over the reducers.
     """
+    coords, key_id, seed, b0, nblocks, realizations, batch_size, reducers = chunk
     start = b0 * BLOCK
     n = nblocks * BLOCK
     out = kernel_outputs(kernel, key_id, seed, start, n, batch_size)
@@ -87,9 +111,9 @@ def compute_chunk(kernel, coords, key_id, seed, b0, nblocks, realizations, batch
     return parts
 
 
-def _remote_chunk(kernel_factory, factory_id, coords, *args):
+def _remote_chunk(kernel_factory, factory_id, chunk: ChunkTask):
     """Dask task: ``compute_chunk`` with the worker's cached kernel."""
-    return compute_chunk(_worker_kernel(kernel_factory, factory_id, coords), coords, *args)
+    return compute_chunk(_worker_kernel(kernel_factory, factory_id, chunk.coords), chunk)
 
 
 
@@ -165,7 +189,7 @@ def run_threads(tasks, kernel_of, args_of, finished, threads):
         def submit_next():
             task = next(pending, None)
             if task is not None:
-                inflight[pool.submit(compute_chunk, kernel_of(task), *args_of(task))] = task
+                inflight[pool.submit(compute_chunk, kernel_of(task), args_of(task))] = task
 
         try:
             for _ in range(2 * threads):
@@ -208,7 +232,7 @@ def run_dask(tasks, kernel_factory, factory_id, args_of, finished, workers, sche
         def submit_next():
             task = next(pending, None)
             if task is not None:
-                fut = client.submit(_remote_chunk, kernel_factory, factory_id, *args_of(task),
+                fut = client.submit(_remote_chunk, kernel_factory, factory_id, args_of(task),
                                     pure=False)
                 owner[fut.key] = task
                 done.add(fut)

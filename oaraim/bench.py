@@ -425,7 +425,7 @@ def bench_availability_map(sets=None, workers=None):
     it on a local Dask cluster of that many processes."""
     import tempfile
 
-    from oaraim.execute import run_sweep_study
+    from oaraim.execute import RunOptions, run_sweep_study
     from oaraim.mc import Execution
     from oaraim.registry import STUDIES
 
@@ -435,7 +435,7 @@ def bench_availability_map(sets=None, workers=None):
     with tempfile.TemporaryDirectory(prefix="oaraim-bench-map-") as tmp:
         t0 = time.perf_counter()
         res, sweep = run_sweep_study(study, params, n, 0, tmp, progress=False,
-                                     execution=Execution(workers=workers))
+                                     options=RunOptions(execution=Execution(workers=workers)))
         wall = time.perf_counter() - t0
     m = res.metrics
     return {"lat_step_deg": _step(params["lat_deg"]), "lon_step_deg": _step(params["lon_deg"]),

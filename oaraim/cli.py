@@ -99,8 +99,10 @@ def list_studies():
                       markup=False)
 
 
-@app.command()
-def run(
+# The command's options are the user interface (its flags and help); the function is private
+# so that its Python signature, one parameter per flag, is no public API.
+@app.command("run")
+def _run(
     study: Annotated[str, typer.Argument(help="study name (see `oaraim list`)")],
     realizations: Annotated[int | None, typer.Option(help="Monte Carlo samples per cell")] = None,
     seed: Annotated[int, typer.Option(help="study seed")] = 0,
@@ -118,7 +120,7 @@ def run(
     trust_data: Annotated[bool, typer.Option("--trust-data", help=TRUST_HELP)] = False,
 ):
     """Run one study; writes OUT/STUDY/{data.zarr, summary.json, provenance.json, *.png}."""
-    from oaraim.execute import run_study
+    from oaraim.execute import RunOptions, run_study
     from oaraim.mc import Execution
 
     _trust(trust_data)
@@ -127,8 +129,9 @@ def run(
         with _warnings_as_lines():
             summary, sdir, figures, wall = run_study(
                 study, realizations=realizations, seed=seed, out=out_dir, sets=set_,
-                quick=quick, show_progress=progress, resume=resume,
-                execution=Execution(workers=workers, scheduler=scheduler), notice=_warn)
+                quick=quick, show_progress=progress, options=RunOptions(
+                    resume=resume, execution=Execution(workers=workers, scheduler=scheduler),
+                    notice=_warn))
     except (ValueError, OSError) as e:  # bad input, unusable --out, a full disk: one line
         _fail(str(e))
     _print_rows(summary)

@@ -19,10 +19,10 @@ from oaraim.mc import (
 from oaraim.mc.checkpoint import Checkpoint, identity
 from oaraim.registry import STUDIES, get_study
 from oaraim.studies import base
-from oaraim.studies.base import ResumableStudy, SweepStudy
+from oaraim.studies.base import ResumableStudy, RunOptions, SweepStudy
 
-__all__ = ["check_data", "data_provenance", "parse_sets", "run_study", "run_sweep_study",
-           "sweep_kernel"]
+__all__ = ["RunOptions", "check_data", "data_provenance", "parse_sets", "run_study",
+           "run_sweep_study", "sweep_kernel"]
 
 SWEEP_FLAGS = "--workers and --scheduler"
 
@@ -54,14 +54,14 @@ def _study_ref(study):
     return study.name if registered and in_package else study
 
 
-def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
-                    execution=None, progress=True):
-    """``studies.base.run_sweep_study`` with a kernel factory that Dask workers can rebuild:
-    a registered study travels by name (``sweep_kernel``). Returns (StudyResult, SweepResult).
+def run_sweep_study(study, params, realizations, seed, out_dir, *, options=None,
+                    progress=True):
+    """``studies.base.run_sweep_study`` (``options``: a ``RunOptions``, resume and execution)
+    with a kernel factory that Dask workers can rebuild: a registered study travels by name
+    (``sweep_kernel``). Returns (StudyResult, SweepResult).
     """
     return base.run_sweep_study(
-        study, params, realizations, seed, out_dir, resume=resume, execution=execution,
-        progress=progress,
+        study, params, realizations, seed, out_dir, options=options, progress=progress,
         kernel_factory=functools.partial(sweep_kernel, _study_ref(study), params))
 
 
@@ -90,21 +90,25 @@ def _stderr_line(text):
 
 
 def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=False,
-              show_progress=True, resume=False, execution=None, notice=None):
+              show_progress=True, options=None):
     """Run study ``name`` and write ``out/name/``; returns (summary dict, output folder, figure
-    paths, wall time in s). Sweep studies and ``ResumableStudy`` ones take ``resume`` (reuse
-    the finished chunks or checkpointed units in ``out/name/``); sweep studies also take
-    ``execution`` (an ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler``
-    address). ``notice(text)`` says, in one line, what the run did on its own (taking over
-    the lock of a run that died); default: printed to stderr as ``warning: ...``.
+    paths, wall time in s). ``options`` (a ``RunOptions``, default all off): sweep studies and
+    ``ResumableStudy`` ones take ``options.resume`` (reuse the finished chunks or checkpointed
+    units in ``out/name/``); sweep studies also take ``options.execution`` (an
+    ``mc.sweep.Execution``: local Dask ``workers`` or a ``scheduler`` address).
+    ``options.notice(text)`` says, in one line, what the run did on its own (taking over the
+    lock of a run that died); default: printed to stderr as ``warning: ...``.
 
     Every user error is a ``ValueError`` with one line (the CLI exits 2): bad parameters, a
     seed outside ``mc.keys.SEED_RANGE``, an unusable ``--out`` and any ``OSError`` while the
     run reads or writes (a full disk: the path, and what to do, ``mc.store.os_error_line``).
     """
+    options = RunOptions() if options is None else options
+    resume, notice = options.resume, options.notice
+    execution = Execution() if options.execution is None else options.execution
+    options = options._replace(execution=execution)
     study = get_study(name)
     seed = check_seed(seed)
-    execution = Execution() if execution is None else execution
     _check_sweep_flags(study, resume, execution)
     overrides = parse_sets(sets)
     if quick:
@@ -133,7 +137,7 @@ def run_study(name, *, realizations=None, seed=0, out="out", sets=(), quick=Fals
                     "longer running" if lock.taken_over else
                     f"{out_dir}: took over a lock file that names no process")
             return _run_locked(study, params, realizations, seed, out_dir, show_progress,
-                               resume, execution)
+                               options)
     except (OutputError, ConnectionError, TimeoutError):
         raise  # one line already; a Dask scheduler's network error says what it is
     except OSError as e:  # a full disk, a folder made read-only: the path and what to do
@@ -152,13 +156,13 @@ def study_outcome(name, *, seed, out, quick, show_progress):
                 "for the traceback)")
 
 
-def _run_locked(study, params, realizations, seed, out_dir, show_progress, resume, execution):
+def _run_locked(study, params, realizations, seed, out_dir, show_progress, options):
     t0 = time.perf_counter()
     extra = {}
+    resume = options.resume
     if isinstance(study, SweepStudy):
         result, sweep = run_sweep_study(study, params, realizations, seed, out_dir,
-                                        resume=resume, execution=execution,
-                                        progress=show_progress)
+                                        options=options, progress=show_progress)
         extra["sweep"] = _sweep_provenance(sweep, resume)
     elif isinstance(study, ResumableStudy):
         checkpoint = Checkpoint(out_dir, identity(study.name, params, seed, realizations),

@@ -389,19 +389,37 @@ def sweep_fingerprint(study, params, realizations, seed):
             "seed": int(seed), "realizations": int(realizations)}
 
 
-def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False, execution=None,
-                    progress=True, kernel_factory=None):
+class RunOptions(NamedTuple):
+    """How a study is run (``oaraim.execute.run_study``, ``run_sweep_study``); none of it
+    changes a result."""
+
+    resume: bool = False
+    """Keep the finished chunks (a sweep) or checkpointed units (a ``ResumableStudy``) of an
+    earlier run in the output folder and compute the rest."""
+    execution: Any = None
+    """An ``mc.Execution`` (host threads, local Dask workers or a scheduler, the chunk size) of
+    a sweep study; None: in-process."""
+    notice: Callable[[str], Any] | None = None
+    """``notice(text)`` says, in one line, what the run did on its own (taking over the lock of
+    a run that died); None: printed to stderr as ``warning: ...``."""
+
+
+def run_sweep_study(study, params, realizations, seed, out_dir, *, options=None, progress=True,
+                    kernel_factory=None):
     """Run a ``SweepStudy`` through ``mc.sweep.run_sweep`` into ``out_dir`` (its chunks and
     sweep.json); returns (StudyResult from ``study.finish``, SweepResult).
 
-    ``execution`` (an ``mc.sweep.Execution``: threads, Dask workers or scheduler) defaults to
-    in-process; the chunk size is the study's (``chunk_size(params)``) unless ``execution``
-    sets one. ``kernel_factory`` (``coords -> kernel``) defaults to the study object's own
-    kernel; ``oaraim.execute`` passes one that Dask workers look up by study name. A run
+    ``options`` (a ``RunOptions``) says whether to resume and where to compute:
+    ``options.execution`` (an ``mc.sweep.Execution``: threads, Dask workers or scheduler)
+    defaults to in-process; the chunk size is the study's (``chunk_size(params)``) unless the
+    execution sets one. ``kernel_factory`` (``coords -> kernel``) defaults to the study object's
+    own kernel; ``oaraim.execute`` passes one that Dask workers look up by study name. A run
     that fails before any chunk is finished removes ``sweep.json`` and ``chunks/`` again.
     """
-    from oaraim.mc import Execution, Storage, remove_if_nothing_finished, run_sweep
+    from oaraim.mc import Draws, Execution, Storage, remove_if_nothing_finished, run_sweep
 
+    options = RunOptions() if options is None else options
+    resume, execution = options.resume, options.execution
     execution = Execution() if execution is None else execution
     if execution.chunk_size is None:
         execution = execution._replace(chunk_size=study.chunk_size(params))
@@ -410,10 +428,10 @@ def run_sweep_study(study, params, realizations, seed, out_dir, *, resume=False,
     storage = Storage(out_dir, sweep_fingerprint(study, params, realizations, seed),
                       resume=resume)
     try:
-        sweep = run_sweep(kernel_factory, study.axes(params), realizations,
-                          study.reducers(params), seed=seed, key_axes=study.key_axes,
-                          storage=storage, execution=execution,
-                          batch_size=study.batch_size(params), progress=progress,
+        sweep = run_sweep(kernel_factory, study.axes(params), study.reducers(params),
+                          Draws(realizations, seed, key_axes=study.key_axes,
+                                batch_size=study.batch_size(params)),
+                          storage=storage, execution=execution, progress=progress,
                           description=study.name)
     except BaseException:
         # a run that failed before finishing a chunk (a kernel's first chunk failed) leaves

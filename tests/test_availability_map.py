@@ -18,7 +18,7 @@ from oaraim.araim.error_models import (
     sop_variances,
 )
 from oaraim.cli import app
-from oaraim.execute import run_study
+from oaraim.execute import RunOptions, run_study
 from oaraim.geometry.ephemeris import GALILEO
 from oaraim.geometry.sky import line_of_sight, look_angles
 from oaraim.reference_mhss import protection_levels_reference
@@ -416,7 +416,7 @@ def test_resume_and_chunking_give_the_same_cube(tmp_path, shared_data):
     assert prov["realizations"] == 12 and set(prov["data_files"]) == {am.GPS_ALMANAC,
                                                                        am.GALILEO_ALMANAC}
     _, c, _, _ = run_study(STUDY.name, out=tmp_path / "a", sets=sets + ["chunk=1024"],
-                           show_progress=False, resume=True)
+                           show_progress=False, options=RunOptions(resume=True))
     assert json.loads((c / "provenance.json").read_text())["sweep"]["chunks_computed"] == 0
 
 

@@ -13,7 +13,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 from oaraim.cli import app
-from oaraim.execute import run_study
+from oaraim.execute import RunOptions, run_study
 from oaraim.mc import checkpoint as ck
 from oaraim.registry import STUDIES
 from oaraim.studies.base import Param, ResumableStudy, StudyResult, count
@@ -149,7 +149,7 @@ def test_interrupted_quick_run_resumed_is_bit_identical(name, stop_after, tmp_pa
     with pytest.raises(_Interrupted):
         run_study(name, quick=True, out=tmp_path / "cut", show_progress=False)
     _, cut, _, _ = run_study(name, quick=True, out=tmp_path / "cut", show_progress=False,
-                             resume=True)
+                             options=RunOptions(resume=True))
     xr.testing.assert_identical(_data(cut), _data(whole))
     assert _json(cut, "summary.json") == _json(whole, "summary.json")
     p = _json(cut, "provenance.json")["checkpoint"]

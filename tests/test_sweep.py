@@ -18,6 +18,7 @@ from oaraim.mc.reduce import BLOCK
 from oaraim.mc.sweep import (
     Axis,
     Count,
+    Draws,
     Execution,
     Histogram,
     Max,
@@ -49,10 +50,12 @@ def toy_factory(coords):
     return functools.partial(toy_kernel, a=float(coords["a"]), b=float(coords["b"]))
 
 
-def _sweep(factory, axes, n, reducers, *, out_dir, fingerprint, resume=False, threads=None,
-           workers=None, scheduler=None, chunk_size=None, scheduler_timeout_s=10.0, **kw):
-    """``run_sweep`` with its storage and execution options gathered into their objects."""
-    return run_sweep(factory, axes, n, reducers,
+def _sweep(factory, axes, n, reducers, *, out_dir, fingerprint, seed, key_axes=(),
+           batch_size=BLOCK, resume=False, threads=None, workers=None, scheduler=None,
+           chunk_size=None, scheduler_timeout_s=10.0, **kw):
+    """``run_sweep`` with its draws, storage and execution options gathered into their
+    objects."""
+    return run_sweep(factory, axes, reducers, Draws(n, seed, key_axes, batch_size),
                      storage=Storage(out_dir, fingerprint, resume=resume),
                      execution=Execution(threads=threads, workers=workers, scheduler=scheduler,
                                          scheduler_timeout_s=scheduler_timeout_s,

@@ -19,7 +19,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 from oaraim.cli import app
-from oaraim.execute import run_study
+from oaraim.execute import RunOptions, run_study
 from oaraim.mc.sweep import Count, Execution, Histogram, Max, Mean
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, positive
 from tests.test_sweep import EDGES, toy_factory
@@ -194,7 +194,7 @@ def test_two_worker_local_dask_cluster_is_bit_identical_to_in_process(tmp_path, 
     t0 = time.perf_counter()
     _, dist, _, _ = run_study(TOY.name, realizations=2500, out=tmp_path / "dask",
                               sets=["chunk=1024"], show_progress=False,
-                              execution=Execution(workers=2))
+                              options=RunOptions(execution=Execution(workers=2)))
     wall = time.perf_counter() - t0
     xr.testing.assert_identical(_data(dist), _data(local))
     p = _prov(dist)["sweep"]
