@@ -54,7 +54,8 @@ from oaraim.araim import ekf as _ekf
 from oaraim.araim import ekf_raim as _er
 from oaraim.araim import filter_monitor as _fm
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
-from oaraim.geometry import frames, imu, recording
+from oaraim.geometry import frames, imu, recording_frame
+from oaraim.readers import recording
 
 #: tolerance, in IMU steps, for uniform IMU stamps and for epochs lying on IMU stamps
 _STEP_TOL = 0.01
@@ -220,7 +221,7 @@ def _prepare(rec: recording.Recording, sigma_pr_m: float) -> _Prepared:
     t_ep = t_imu[idx[0]] + np.arange(e) * n * dt
     t_ep[slot] = t_pr  # the recorded stamps where there are epochs
     return _Prepared(t_ep, g.reshape(e, n, 3), a.reshape(e, n, 3), z, v, sig,
-                     recording.tower_clock_m(rec, t_ep), recording.transmitters_enu_m(rec),
+                     recording.tower_clock_m(rec, t_ep), recording_frame.transmitters_enu_m(rec),
                      pm.ids, float(t_imu[start] - dt), dt)
 
 
@@ -256,7 +257,7 @@ def _initial_state(rec, prep: _Prepared, initial, p0):
             "no initial state: the replay needs the truth table (with velocity and quaternion "
             "columns), a meta.json 'initial_state' object, or the initial= argument (seed 000 "
             "initializes the EKF from a period of GNSS availability)")
-    tr = recording.truth_enu(rec)
+    tr = recording_frame.truth_enu(rec)
     if tr.velocity_enu_mps is None or tr.quaternion is None:
         raise ValueError("initializing from truth needs its velocity (vx_mps, vy_mps, vz_mps) "
                          "and quaternion (qx, qy, qz, qw) columns; or give meta.json "
@@ -314,7 +315,7 @@ def replay_ekf_raim(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
     pos = sw(r)
     truth = err = err2 = None
     if rec.truth is not None:
-        tr = recording.truth_enu(rec)
+        tr = recording_frame.truth_enu(rec)
         inside = (prep.t_s >= tr.t_s[0] - 1e-9) & (prep.t_s <= tr.t_s[-1] + 1e-9)
         truth = _interp(prep.t_s, tr.t_s, tr.position_enu_m)
         truth[~inside] = np.nan  # outside the truth table: no error (NaN marks "unknown")
@@ -372,7 +373,7 @@ def replay_filter_monitor(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
     out = jax.tree.map(np.asarray, out)
     err2 = None
     if rec.truth is not None:
-        tr = recording.truth_enu(rec)
+        tr = recording_frame.truth_enu(rec)
         inside = (prep.t_s >= tr.t_s[0] - 1e-9) & (prep.t_s <= tr.t_s[-1] + 1e-9)
         truth = _interp(prep.t_s, tr.t_s, tr.position_enu_m)
         truth[~inside] = np.nan

@@ -35,14 +35,13 @@ from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, FaultModeRule, fault_mod
 from oaraim.araim.mhss import MHSSResult, protection_levels
 from oaraim.araim.validate import check_range
 from oaraim.geometry import (
-    MIN_SEPARATION_M,
     ephemeris_gaps,
-    first_near_pair,
     geodetic_to_ecef,
     geometry_rows,
     look_angles,
     satellites,
 )
+from oaraim.readers import MIN_SEPARATION_M, first_near_pair
 
 __all__ = ["ISM_GALILEO", "ISM_GPS", "ISM_SOP", "SOURCE_BUCKETS", "EpochLevels", "Ism",
            "epoch_protection_levels"]

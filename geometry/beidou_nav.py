@@ -1,5 +1,6 @@
 """BeiDou (BDS-2 / BDS-3) broadcast ephemerides of MEO and IGSO satellites, for the
-broadcast-vs-precise comparison (``geometry.sis_error``). GEO satellites (C01-C05, C59-C63)
+broadcast-vs-precise comparison (``geometry.sis_error``); the records are read by
+``readers.read_beidou_records``. GEO satellites (C01-C05, C59-C63)
 are left out: their broadcast orbit uses another transformation (BDS-SIS-ICD-B1I 3.0,
 5.2.4.12) that this module does not implement. The satellites are not part of
 ``geometry.Ephemeris`` (the ARAIM constellations are GPS and Galileo).
@@ -21,23 +22,18 @@ Service Signal B1I, Version 3.0 (CSNO, 2019), and RINEX 3.05 Table A12 (the D1/D
   within ``max_age_s``).
 """
 
-import os
-from pathlib import Path
 from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 
 from oaraim.constants import (
-    BDT_WEEK_OFFSET,
     F_B1I_HZ,
     F_B3I_HZ,
-    GPS_MINUS_BDT_S,
     MU_BDS_M3_S2,
     OMEGA_E_BDS_RAD_S,
     OMEGA_E_GNSS_RAD_S,
 )
-from oaraim.geometry import ephemeris, gpstime
 from oaraim.geometry.kepler import (
     F_GAL_S_SQRT_M,
     OrbitElements,
@@ -45,18 +41,13 @@ from oaraim.geometry.kepler import (
     orbit_ecef,
     relativistic_clock_s,
 )
+from oaraim.readers import GEO_PRNS, read_beidou_records  # noqa: F401  (GEO_PRNS: kept here)
 
-#: GEO satellites (BDS-2 C01-C05, BDS-3 C59-C63): left out
-GEO_PRNS = frozenset(range(1, 6)) | frozenset(range(59, 64))
 #: IGSO satellites flying in 2023 (BDS-2 C06-C10, C13, C16; BDS-3 C38-C40): their SISRE
 #: weights differ from the MEO ones
 IGSO_PRNS = frozenset((6, 7, 8, 9, 10, 13, 16, 38, 39, 40))
 #: relativistic clock constant with the CGCS2000 mu (= WGS-84's: the Galileo value)
 F_BDS_S_SQRT_M = F_GAL_S_SQRT_M
-
-_ELEMENTS = ("sqrtA", "Eccentricity", "Io", "IDOT", "Omega0", "OmegaDot", "omega", "M0",
-             "DeltaN", "Cuc", "Cus", "Crc", "Crs", "Cic", "Cis", "SVclockBias", "SVclockDrift",
-             "SVclockDriftRate", "TGD1", "TGD2", "health")
 
 
 class BeidouState(NamedTuple):
@@ -133,8 +124,8 @@ class BeidouEphemeris:
 
 
 def load_beidou(path, clock="B1I/B3I", max_age_s=4 * 3600.0) -> BeidouEphemeris:
-    """The BeiDou MEO and IGSO satellites of a RINEX 3 navigation file (plain or .gz), checked
-    like every record by ``geometry.ephemeris.check_navigation_file``.
+    """The BeiDou MEO and IGSO satellites of a RINEX 3 navigation file (plain or .gz), read and
+    checked by ``readers.read_beidou_records``.
 
     Args:
       path: the file.
@@ -142,39 +133,5 @@ def load_beidou(path, clock="B1I/B3I", max_age_s=4 * 3600.0) -> BeidouEphemeris:
         broadcast reference).
       max_age_s: largest |t - t_oe| of a usable record (default 4 h).
     """
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise ephemeris.NavigationFileError(f"navigation file {str(path)!r} not found; give an "
-                                            "existing RINEX 3 navigation file (plain or .gz)")
-    st = os.stat(p)
-    _info, ds = ephemeris.georinex_navigation(str(p.resolve()), st.st_mtime_ns, st.st_size,
-                                              ("C",))
-    toc_bdt = gpstime.from_datetime64(ds["time"].values)  # as written, BDT read as GPS seconds
-    svs = [str(s) for s in ds["sv"].values]
-    per_sat: dict = {}
-    for j, sv in enumerate(svs):
-        name = sv[:3]
-        if int(name[1:]) in GEO_PRNS:
-            continue
-        vals = {n: np.asarray(ds[n].values[:, j], np.float64) for n in (*_ELEMENTS, "Toe",
-                                                                         "BDTWeek")}
-        have = np.isfinite(vals["sqrtA"]) & np.isfinite(vals["Toe"])
-        if not have.any():
-            continue
-        rows = {n: v[have] for n, v in vals.items()}
-        rows["toc_gps_s"] = toc_bdt[have] + GPS_MINUS_BDT_S
-        week = np.where(np.isfinite(rows["BDTWeek"]), rows["BDTWeek"],
-                        gpstime.week_tow(toc_bdt[have])[0] - BDT_WEEK_OFFSET)
-        toe = gpstime.from_week_tow((week + BDT_WEEK_OFFSET).astype(np.int64), rows["Toe"])
-        # a t_oe written with t_oc's week near a week boundary: the nearer week
-        toe = toe - gpstime.SECONDS_PER_WEEK * np.round((toe - toc_bdt[have])
-                                                        / gpstime.SECONDS_PER_WEEK)
-        rows["toe_gps_s"] = toe + GPS_MINUS_BDT_S
-        for n in rows:
-            rows[n] = np.nan_to_num(rows[n])
-        old = per_sat.get(name)
-        per_sat[name] = rows if old is None else {n: np.concatenate([old[n], rows[n]])
-                                                  for n in rows}
-    if not per_sat:
-        raise ephemeris.NavigationFileError(f"{p}: no BeiDou MEO or IGSO records")
-    return BeidouEphemeris(per_sat, p, clock, max_age_s)
+    nav = read_beidou_records(path)
+    return BeidouEphemeris(nav.records, nav.path, clock, max_age_s)

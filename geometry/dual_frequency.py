@@ -1,7 +1,7 @@
 """Ionosphere-free code pseudoranges of a dual-frequency GPS + Galileo receiver.
 
 ``iono_free(table)`` forms, per satellite and epoch, the first pair of ``PAIRS`` its system
-offers (RINEX 3 observation codes of ``geometry.rinex_obs.read_observation_table``):
+offers (RINEX 3 observation codes of ``readers.read_observation_table``):
 
 * GPS L1/L5: C1C with C5Q, C5X or C5I (the ARAIM default, ADD);
 * GPS L1/L2: C1C with C2W, else with the civil L2C (C2L, C2X, C2S) for a receiver that does

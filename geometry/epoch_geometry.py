@@ -2,7 +2,7 @@
 (``araim.snapshot.replay``) takes, over epochs T and sources L (GPS satellites, then the
 terrestrial transmitters), in WGS-84 ECEF.
 
-``from_recording`` reads them from a recording (``geometry.recording``: a real drive or a
+``from_recording`` reads them from a recording (``readers.recording``: a real drive or a
 synthesized one); ``oaraim.sim.scenario_geometry`` builds the noise-free ones of a simulated
 drive or flight, so both go through the same replay path.
 """
@@ -11,11 +11,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.geometry import frames, gpstime
-from oaraim.geometry.recording import (
+from oaraim.geometry import frames
+from oaraim.readers import (
     Recording,
     epochs,
     gnss_matrix,
+    gpstime,
     pseudorange_matrix,
     tower_clock_m,
 )

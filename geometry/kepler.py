@@ -19,14 +19,12 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from oaraim.constants import OMEGA_E_GNSS_RAD_S
+from oaraim.constants import GPS_PI, OMEGA_E_GNSS_RAD_S  # noqa: F401  (GPS_PI: kept here)
 
 #: relativistic clock constant F = -2 sqrt(mu) / c^2, s/m^(1/2) (IS-GPS-200 20.3.3.3.3.1)
 F_GPS_S_SQRT_M = -4.442807633e-10
 #: the same with Galileo's mu (Galileo OS SIS ICD Issue 2.0, section 5.1.4)
 F_GAL_S_SQRT_M = -4.442807309e-10
-#: pi as IS-GPS-200 20.3.3.4.3 fixes it for the semicircle conversions of the broadcast data
-GPS_PI = 3.1415926535898
 #: Newton iterations for Kepler's equation E - e sin E = M. From E_0 = M the error contracts
 #: quadratically; for e <= 0.3 (the largest we accept) 8 steps reach machine precision.
 KEPLER_ITERATIONS = 8
@@ -35,7 +33,7 @@ KEPLER_ITERATIONS = 8
 class OrbitElements(NamedTuple):
     """One broadcast record per element (arrays of one common shape), SI units and radians.
 
-    ``toe_s`` and ``t`` are absolute GPS seconds (``geometry.gpstime``), so t - t_oe needs no
+    ``toe_s`` and ``t`` are absolute GPS seconds (``readers.gpstime``), so t - t_oe needs no
     week-crossover fix; ``toe_tow_s`` is t_oe within its week, needed by the Omega term.
     """
 

@@ -39,8 +39,8 @@ from oaraim.constants import (
     WGS84_GM_M3_S2,
     WGS84_J2,
 )
-from oaraim.geometry import gpstime
 from oaraim.geometry.sky import Sky, look_angles
+from oaraim.readers import gpstime
 
 #: the largest 3-D distance (m) between a Walker shell propagated here (secular J2) and
 #: SGP4 on the TLEs of the same mean elements (SGP4's Brouwer mean motion equal to ours) over

@@ -17,7 +17,7 @@ f 360 / 24 = 15 deg. The epoch (00:00 GPS time, 22 August 1999: the GST/week-102
 the node of plane A (longitude 0 deg at that epoch) are our choices; PRNs E01-E24 are the slots
 A1..A8, B1..B8, C1..C8.
 
-Both are returned as ``geometry.almanac.Almanac`` objects (one circular Keplerian record per
+Both are returned as ``geometry.Almanac`` objects (one circular Keplerian record per
 satellite), so they share the almanac propagation and ``sat_position_ecef`` signature.
 """
 
@@ -26,9 +26,8 @@ import functools
 import numpy as np
 
 from oaraim.constants import OMEGA_E_GNSS_RAD_S
-from oaraim.geometry import gpstime
-from oaraim.geometry.almanac import Almanac, AlmanacRecords
-from oaraim.geometry.ephemeris import GALILEO, GPS
+from oaraim.geometry.almanac_orbits import Almanac
+from oaraim.readers import GALILEO, GPS, AlmanacRecords, gpstime
 
 #: SPS PS Table 3.2-2 reference epoch: 0000Z (UTC) 1 July 1993. GPS - UTC was 9 s after the leap
 #: second of 30 June 1993 (IERS Bulletin C 5), hence + 9 s to express it in GPS time.

@@ -42,9 +42,8 @@ from jaxtyping import Real
 
 from oaraim.constants import C_M_S, OMEGA_E_GNSS_RAD_S, SISRE_WEIGHTS
 from oaraim.geometry.beidou_nav import BeidouEphemeris
-from oaraim.geometry.ephemeris import Ephemeris
-from oaraim.geometry.rinex_clk import PreciseClocks
-from oaraim.geometry.sp3 import PreciseOrbits
+from oaraim.geometry.broadcast_orbits import Ephemeris
+from oaraim.readers import PreciseClocks, PreciseOrbits
 
 
 class SISError(NamedTuple):

@@ -25,10 +25,11 @@ import numpy as np
 from jax.typing import ArrayLike
 from jaxtyping import Array, Bool, Float, Real, Shaped
 
-from oaraim.geometry.almanac import Almanac, read_sem, read_yuma
-from oaraim.geometry.ephemeris import GALILEO, GPS, Ephemeris, load_navigation
+from oaraim.geometry.almanac_orbits import Almanac, read_sem, read_yuma
+from oaraim.geometry.broadcast_orbits import Ephemeris, load_navigation
 from oaraim.geometry.frames import ecef_to_geodetic, enu_rotation
 from oaraim.geometry.nominal import galileo_walker, gps_24_slot
+from oaraim.readers import GALILEO, GPS
 
 CONSTELLATION_CODES = {"gps": GPS, "galileo": GALILEO}
 
@@ -214,7 +215,7 @@ def sky(receiver_ecef_m: Real[ArrayLike, "*rx 3"],
 
     Args:
       receiver_ecef_m: ``(3,)`` or ``(..., 3)`` receiver positions.
-      t_gps_s: epochs, GPS seconds (``geometry.gpstime``), shape ``(T,)`` or scalar.
+      t_gps_s: epochs, GPS seconds (``readers.gpstime``), shape ``(T,)`` or scalar.
       source: 'nominal' (default: built-in GPS 24-slot + Galileo Walker), 'nominal-gps',
         'nominal-galileo', a RINEX navigation / YUMA / SEM file, or loaded orbit objects.
       mask_deg: elevation mask in degrees, [0, 90). Default 5 deg (ARAIM practice).

@@ -261,7 +261,7 @@ def bench_sky(repeats=3):
     (b) 1,000 receivers (a 0.1-degree grid around Madrid) x 288 epochs (24 h at 5 min).
     Best of ``repeats`` after a compiling call; the file's parse is cached per process and
     reported separately."""
-    from oaraim.geometry import gpstime
+    from oaraim.readers import gpstime
 
     t0 = float(gpstime.gps_seconds(2018, 6, 19))
     day30 = t0 + 30.0 * np.arange(2880)

@@ -25,6 +25,8 @@ WGS84_OMEGA_E_RAD_S = 7.292115e-5
 #: Earth rotation rate of the GPS and Galileo broadcast models, rad/s (IS-GPS-200 Table 20-IV;
 #: Galileo OS SIS ICD Issue 2.0 Table 59): the value the ephemeris user algorithm must use
 OMEGA_E_GNSS_RAD_S = 7.2921151467e-5
+#: pi as IS-GPS-200 20.3.3.4.3 fixes it for the semicircle conversions of the broadcast data
+GPS_PI = 3.1415926535898
 #: GM of the GPS broadcast model, m^3/s^2 (IS-GPS-200 Table 20-IV)
 MU_GPS_M3_S2 = 3.986005e14
 #: GM of the Galileo broadcast model, m^3/s^2 (Galileo OS SIS ICD Issue 2.0 Table 59)

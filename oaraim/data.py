@@ -522,9 +522,9 @@ def fetch_daily_nav(date: str, archive: str | None = None, progress: bool = True
 def _check_downloaded_nav(p: Path, url: str, date: str) -> None:
     """Refuse a download that is not a readable RINEX navigation file (an archive's HTML error
     page, a truncated transfer) before it is cached: the structural check the navigation
-    reader itself runs first (``geometry.ephemeris.check_navigation_file``), so a file kept
+    reader itself runs first (``readers.check_navigation_file``), so a file kept
     here is one ``--set nav=PATH`` can read."""
-    from oaraim.geometry import NavigationFileError, check_navigation_file
+    from oaraim.readers import NavigationFileError, check_navigation_file
 
     with open(p, "rb") as f:
         head = f.read(40)

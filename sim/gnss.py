@@ -37,18 +37,9 @@ import pandas as pd
 
 from oaraim.araim import error_models
 from oaraim.constants import C_M_S
-from oaraim.geometry import (
-    FORMAT_NAME,
-    FORMAT_VERSION,
-    EpochGeometry,
-    Recording,
-    frames,
-    gpstime,
-    look_angles,
-    satellites,
-    validate_recording,
-)
+from oaraim.geometry import EpochGeometry, frames, look_angles, satellites
 from oaraim.mc import stream
+from oaraim.readers import FORMAT_NAME, FORMAT_VERSION, Recording, gpstime, validate_recording
 from oaraim.sim.measurement import (
     ErrorModel,
     gauss_markov_step,

@@ -16,7 +16,8 @@ import pandas as pd
 
 from oaraim.araim.ekf_raim import InitialUncertainty
 from oaraim.constants import C_M_S
-from oaraim.geometry import frames, imu, recording
+from oaraim.geometry import frames, imu
+from oaraim.readers import recording
 from oaraim.sim.drive import DriveSetup, drive_setup, filter_sigma, initial_draw
 from oaraim.sim.measurement import EpochTowers, EpochTruth, ErrorModel, drive_epoch
 from oaraim.sim.trajectory import Scenario

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, geometry, mc
+from oaraim import araim, geometry, mc, readers
 from oaraim.studies.base import (
     Param,
     ResumableStudy,
@@ -56,7 +56,7 @@ MAX_STEPS = 20
 #: P_const GPS and Galileo
 GNSS_ISM = (araim.ISM_GPS, araim.ISM_GALILEO)
 #: the day of the skies (its nominal constellations are representative, not a date's)
-SKY_DAY_T_GPS_S = float(geometry.gpstime.gps_seconds(2025, 1, 1))
+SKY_DAY_T_GPS_S = float(readers.gpstime.gps_seconds(2025, 1, 1))
 STEP_S = 300.0
 
 

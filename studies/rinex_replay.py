@@ -7,7 +7,7 @@ rotation during the transit (Sagnac) -> WNLS -> chi-square slope RAIM and MHSS (
 protection levels, each with exclusion -> horizontal/vertical position errors against a truth
 (``--set truth=X,Y,Z`` in ECEF metres, default the header's APPROX POSITION, which for the GSI
 stations of the shared data is the surveyed position) -> HPE vs HPL over time and a Stanford
-diagram. The pseudorange model is in ``geometry.rinex_obs``; the per-epoch integrity in
+diagram. The pseudorange model is in ``geometry.pseudorange_model``; the per-epoch integrity in
 ``araim.snapshot`` (which the GNSS + SOP replays reuse).
 
 One realization = one epoch of the file: ``--realizations N`` replays the first N epochs (all
@@ -54,7 +54,8 @@ from oaraim import araim, data, geometry
 from oaraim.araim import required_order, snapshot
 from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
 from oaraim.constants import C_M_S
-from oaraim.geometry import gpstime, rinex_obs
+from oaraim.geometry import pseudorange_model as prm
+from oaraim.readers import gpstime, navigation_extras, rinex_obs, tgd_at
 from oaraim.studies.base import (
     Param,
     Study,
@@ -166,9 +167,9 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
     """Per-epoch inputs of ``araim.snapshot.replay`` from real GNSS observations.
 
     Args:
-      obs: ``geometry.rinex_obs.Observations``.
+      obs: ``readers.Observations``.
       ephemeris: ``geometry.load_navigation(nav, systems=("G",))``.
-      extras: ``geometry.rinex_obs.navigation_extras(nav)`` (Klobuchar, T_GD).
+      extras: ``readers.navigation_extras(nav)`` (Klobuchar, T_GD).
       mask_deg: elevation mask at the receiver estimate.
       sigma_ura_m: URA of the integrity model (seed 004 Table I: 1 m).
       iono: "klobuchar" or "none"; tropo: "mops" or "none".
@@ -182,8 +183,8 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
       ``ephemeris_age_s``, ``x_ecef_m`` (T, 3) last WNLS position, ``iono_model``.
     """
     t = obs.t_gps_s
-    tgd = rinex_obs.tgd_at(extras, obs.sv, t)
-    sat = rinex_obs.satellites_at_transmit(ephemeris, t, obs.pseudorange_m, obs.valid, obs.sv,
+    tgd = tgd_at(extras, obs.sv, t)
+    sat = prm.satellites_at_transmit(ephemeris, t, obs.pseudorange_m, obs.valid, obs.sv,
                                            tgd)
     use_iono = iono == "klobuchar" and extras.alpha is not None
     if iono == "klobuchar" and extras.alpha is None:
@@ -198,13 +199,13 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
     valid = sat.valid
     n_t, n_s = pr.shape
     # pass 0: Earth's centre, satellite clocks only, Sagnac with the travel time from the centre
-    rot, _ = rinex_obs.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
+    rot, _ = prm.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
     sol = araim.wnls(np.where(valid, pr + clock_m - tgd_m, 0.0), np.asarray(rot), 1.0,
                      valid=valid)
     x = np.asarray(sol.position_m)
     mask = np.deg2rad(mask_deg)
     for _ in range(max(2, n_passes) - 1):
-        rt = rinex_obs.receiver_terms(x, sat.ecef_tx_m, t, extras.alpha if use_iono else None,
+        rt = prm.receiver_terms(x, sat.ecef_tx_m, t, extras.alpha if use_iono else None,
                                       extras.beta if use_iono else None)
         el = np.asarray(rt.el_rad)
         iono_m = np.asarray(rt.iono_m)
@@ -217,7 +218,7 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
         sol = araim.wnls(np.where(v, pr + corr, 0.0), np.asarray(rt.sat_ecef_m),
                          np.sqrt(np.where(v, var_int, 1.0)), x0_m=x, valid=v)
         x = np.asarray(sol.position_m)
-    rt = rinex_obs.receiver_terms(x, sat.ecef_tx_m, t, extras.alpha if use_iono else None,
+    rt = prm.receiver_terms(x, sat.ecef_tx_m, t, extras.alpha if use_iono else None,
                                   extras.beta if use_iono else None)
     el = np.asarray(rt.el_rad)
     iono_m = np.asarray(rt.iono_m)
@@ -420,7 +421,7 @@ class RinexReplay(Study):
                                           lenient=params["bad_epochs"] == "skip")
         eph = geometry.load_navigation(nav_path, systems=("G",))
         check_coverage(eph, obs.t_gps_s, nav_path, params["allow_gaps"] == "yes")
-        extras = rinex_obs.navigation_extras(nav_path)
+        extras = navigation_extras(nav_path)
         if params["truth"] == "header":
             if obs.approx_position_m is None:
                 raise ValueError(f"{obs_path}: the header has no usable APPROX POSITION XYZ; "

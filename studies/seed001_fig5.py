@@ -35,7 +35,7 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim import lambda_det_table, slope_hpl_kernel
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 from oaraim.studies.base import (
     Calibration,
     Free,

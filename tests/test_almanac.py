@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
-from oaraim.constants import MU_GPS_M3_S2, OMEGA_E_GNSS_RAD_S
-from oaraim.geometry.kepler import GPS_PI
+from oaraim.constants import GPS_PI, MU_GPS_M3_S2, OMEGA_E_GNSS_RAD_S
 from oaraim.geometry.nominal import GPS_SPS_EPOCH_T_GPS_S
 
 DEG = np.pi / 180.0
@@ -291,7 +290,7 @@ def test_orbit_limits_are_the_constellations_and_hold_every_real_orbit(shared_da
     """A Galileo almanac with a GPS-sized orbit (26,560 km) is refused (the limits are per
     constellation), and so is a SEM record inside the Earth; every satellite of the real
     almanacs passes (GPS 2020 and MAAST's DO-229 file, Galileo ED-259)."""
-    from oaraim.geometry.orbit_limits import ORBIT_LIMITS, implausible_orbit
+    from oaraim.readers import ORBIT_LIMITS, implausible_orbit
 
     gal = (shared_data / "almanac" / "alm_gal_ed259.txt").read_text()
     line = next(ln for ln in gal.splitlines() if ln.startswith("SQRT(A)"))

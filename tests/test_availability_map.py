@@ -19,8 +19,8 @@ from oaraim.araim.error_models import (
 )
 from oaraim.cli import app
 from oaraim.execute import RunOptions, run_study
-from oaraim.geometry.ephemeris import GALILEO
 from oaraim.geometry.sky import line_of_sight, look_angles
+from oaraim.readers import GALILEO
 from oaraim.reference_mhss import protection_levels_reference
 from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am

@@ -30,7 +30,7 @@ def test_iono_free_factors_and_parse_ism():
 
 def _table(c1c, c2w, c5q):
     """A GPS-only observation table of three satellites from (T, 3) code arrays."""
-    from oaraim.geometry.observation_table import ObservationTable
+    from oaraim.readers import ObservationTable
 
     t = np.arange(c1c.shape[0]) * 30.0
     return ObservationTable(t, np.array(["G01", "G02", "G03"]), {"G": ("C1C", "C2W", "C5Q")},

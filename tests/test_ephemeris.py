@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
-from oaraim.geometry import gpstime
-from oaraim.geometry.ephemeris import check_navigation_file
 from oaraim.geometry.kepler import OrbitElements, orbit_ecef
+from oaraim.readers import check_navigation_file, gpstime
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ import pytest
 from oaraim import araim, geometry
 from oaraim.araim import Status
 from oaraim.araim.error_models import gnss_variances, sigma_user_ed259a_m
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 ROOT = Path(__file__).resolve().parents[1]
 VILL = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"  # 32 GPS + 18 Galileo, 2018-06-19

@@ -5,7 +5,7 @@ import pytest
 
 from oaraim import geometry
 from oaraim.constants import WGS84_A_M, WGS84_B_M, WGS84_E2
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 DEG = np.pi / 180.0
 

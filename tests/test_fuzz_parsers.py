@@ -29,7 +29,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from oaraim import geometry, sim
-from oaraim.geometry import ephemeris, recording, rinex_obs
+from oaraim.readers import navigation, recording, rinex_obs
 from oaraim.studies import availability_map
 from tests.test_almanac import _sem_text
 
@@ -248,7 +248,7 @@ def _check_ephemeris(eph):
         n = int(eph.n_records[k])
         p = {name: eph._params[name][k] for name in ("e", "sqrt_a")}
         ok = np.isfinite(eph._toe_healthy[k])
-        assert np.all((p["e"][ok] >= 0) & (p["e"][ok] <= ephemeris.E_MAX)), p
+        assert np.all((p["e"][ok] >= 0) & (p["e"][ok] <= navigation.E_MAX)), p
         assert np.all(p["sqrt_a"][ok] > 0), p
         assert n >= 1
 
@@ -261,7 +261,7 @@ def _nav_case(cases, data, suffix):
             warnings.simplefilter("ignore")
             return geometry.load_navigation(path, systems=("G", "E"))
 
-    eph = expect_parse_error(ephemeris.NavigationFileError, path, call)
+    eph = expect_parse_error(navigation.NavigationFileError, path, call)
     if eph is not None:
         _check_ephemeris(eph)
     return eph

@@ -7,7 +7,8 @@ import pytest
 
 import oaraim  # noqa: F401  (float64)
 from oaraim import geometry
-from oaraim.geometry import gpstime, leo
+from oaraim.geometry import leo
+from oaraim.readers import gpstime
 
 T0 = float(gpstime.gps_seconds(2025, 3, 1))
 

@@ -19,7 +19,8 @@ import pytest
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import leo_errors as le
-from oaraim.geometry import gpstime, leo
+from oaraim.geometry import leo
+from oaraim.readers import gpstime
 
 RAISE_TOL_M = 2e-3
 #: the kernel's root is within 1e-4 m, the oracle's bisection within 1e-6 m (test_mhss.py)

@@ -11,8 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from oaraim import geometry, sim
-from oaraim.geometry import recording as R
-from oaraim.geometry.recording import RecordingError
+from oaraim.geometry import recording_frame as F
+from oaraim.readers import RecordingError
+from oaraim.readers import recording as R
 
 
 @pytest.fixture(scope="module")
@@ -120,11 +121,11 @@ def test_example_pseudoranges_follow_the_documented_model(rec):
 
 
 def test_frames_attitude_and_gps_time(rec):
-    enu = R.transmitters_enu_m(rec)
+    enu = F.transmitters_enu_m(rec)
     np.testing.assert_allclose(enu, [[200, 150, 30], [-150, 300, 25], [100, -250, 35]],
                                atol=1e-6)
-    np.testing.assert_allclose(R.transmitters_enu_m(rec, ["T3"]), enu[2:], atol=0)
-    tr = R.truth_enu(rec)
+    np.testing.assert_allclose(F.transmitters_enu_m(rec, ["T3"]), enu[2:], atol=0)
+    tr = F.truth_enu(rec)
     psi = np.deg2rad(30.0)
     np.testing.assert_allclose(tr.velocity_enu_mps, np.broadcast_to(
         [10 * np.cos(psi), 10 * np.sin(psi), 0], tr.velocity_enu_mps.shape), atol=1e-9)
@@ -135,7 +136,7 @@ def test_frames_attitude_and_gps_time(rec):
                                atol=1e-9)
     np.testing.assert_allclose(c[0] @ c[0].T, np.eye(3), atol=1e-15)
     assert R.t_gps_s(rec, 1.5) == 2290 * 604800 + 345600 + 1.5
-    np.testing.assert_allclose(np.linalg.norm(R.origin_ecef_m(rec)), 6.372e6, rtol=1e-3)
+    np.testing.assert_allclose(np.linalg.norm(F.origin_ecef_m(rec)), 6.372e6, rtol=1e-3)
 
 
 def test_tower_clock_hand_values(rec):

@@ -1,7 +1,7 @@
 """RINEX 3 navigation files as stations and the IGS publish them: mixed (``MN``), the IGS merged
 daily ``BRDC00IGS`` file whose records come from several contributors (optional and spare
 fields written by some, left blank by others), and single-system ``GN`` / ``EN`` files. Records
-are read by field position (``geometry.rinex_nav3``) and checked by what they mean."""
+are read by field position (``readers.rinex_nav3``) and checked by what they mean."""
 
 import gzip
 import io
@@ -10,9 +10,9 @@ import warnings
 import numpy as np
 import pytest
 
-from oaraim import geometry
-from oaraim.geometry import ephemeris, gpstime, rinex_nav3
-from oaraim.geometry.ephemeris import check_navigation_file
+from oaraim import geometry, readers
+from oaraim.readers import check_navigation_file, gpstime, rinex_nav3
+from oaraim.readers import navigation as ephemeris
 
 BRDC = {2023: "obs3/BRDC00IGS_R_20230010000_01D_MN.rnx.gz",
         2024: "obs3/BRDC00IGS_R_20240010000_01D_MN.rnx.gz"}
@@ -56,7 +56,7 @@ def test_igs_merged_brdc_loads_whole(shared_data, year, n_gps, rec_gps, n_gal, r
     assert np.all(np.abs(r[:, gps][v[:, gps]] - 26.56e6) < 0.7e6)
     assert np.all(np.abs(r[:, gal][v[:, gal]] - 29.6e6) < 0.1e6)
     assert np.all(np.abs(np.asarray(s.age_s)[v]) <= 4 * 3600.0)
-    ex = geometry.rinex_obs.navigation_extras(path)
+    ex = readers.navigation_extras(path)
     assert ex.alpha is not None and ex.tgd_sv.size == rec_gps
 
 

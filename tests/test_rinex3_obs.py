@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
-from oaraim.geometry import gpstime, rinex_obs
+from oaraim.readers import gpstime, rinex_obs
 
 TLSE = "obs3/TLSE00FRA_R_20240011800_01H_30S_MO.crx.gz"
 NIST = "obs3/NIST00USA_R_20230010000_01D_30S_MO.crx.gz"

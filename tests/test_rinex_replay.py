@@ -8,7 +8,8 @@ import pytest
 
 from oaraim import araim, geometry
 from oaraim.constants import C_M_S
-from oaraim.geometry import rinex_obs
+from oaraim.geometry import pseudorange_model as prm
+from oaraim.readers import navigation_extras, rinex_obs, tgd_at
 from oaraim.registry import STUDIES
 from oaraim.studies import rinex_replay
 
@@ -233,7 +234,7 @@ def test_rinex_replay_bad_epoch_is_one_line_exit_2(shared_data, tmp_path):
 def station(shared_data):
     obs = rinex_obs.read_observations(shared_data / "obs" / "07590920.05o")
     nav = shared_data / "obs" / "07590920.05n"
-    return obs, geometry.load_navigation(nav, systems=("G",)), rinex_obs.navigation_extras(nav)
+    return obs, geometry.load_navigation(nav, systems=("G",)), navigation_extras(nav)
 
 
 def test_read_observations_0759(station):
@@ -252,7 +253,7 @@ def test_read_observations_0759(station):
     # header ION ALPHA / ION BETA of 07590920.05n
     np.testing.assert_allclose(extras.alpha, [1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8])
     np.testing.assert_allclose(extras.beta, [8.806e4, 1.638e4, -1.966e5, -1.311e5])
-    tgd = rinex_obs.tgd_at(extras, obs.sv, obs.t_gps_s)
+    tgd = tgd_at(extras, obs.sv, obs.t_gps_s)
     # T_GD of these satellites: -1.4 to -21.4 ns (0.4-6.4 m): it matters for L1 users
     assert np.all((tgd < 0) & (tgd > -3e-8))
 
@@ -264,7 +265,7 @@ def synthetic_pseudoranges(obs, eph, extras, x, clock_s):
     t = obs.t_gps_s
     sv = obs.sv  # the file's satellites (the same array shapes as the real replay)
     t_true = t - clock_s
-    tgd = rinex_obs.tgd_at(extras, sv, t)
+    tgd = tgd_at(extras, sv, t)
     pr = np.zeros((t.size, sv.size))
     ok = np.zeros(pr.shape, bool)
     sat_tx = np.zeros(pr.shape + (3,))
@@ -278,7 +279,7 @@ def synthetic_pseudoranges(obs, eph, extras, x, clock_s):
         ok[:, j] = np.asarray(st.valid)[:, 0]
         sat_tx[:, j] = p
         pr[:, j] = C_M_S * (tau + clock_s - (np.asarray(st.clock_s)[:, 0] - tgd[:, j]))
-    rt = rinex_obs.receiver_terms(np.broadcast_to(x, (t.size, 3)), sat_tx, t, extras.alpha,
+    rt = prm.receiver_terms(np.broadcast_to(x, (t.size, 3)), sat_tx, t, extras.alpha,
                                   extras.beta)
     ok &= np.asarray(rt.el_rad) > 0
     pr = pr + np.asarray(rt.iono_m) + np.asarray(rt.tropo_m)
@@ -302,8 +303,8 @@ def test_measurement_model_recovers_position_to_a_millimetre(station):
     assert np.max(np.abs(out["residual_m"])) < 1e-3
     assert np.all(np.isfinite(out["hpl_mhss_m"])) and not np.any(out["mhss_detected"])
     # the same pseudoranges with satellites left in their transmit-time frame
-    sat = rinex_obs.satellites_at_transmit(eph, syn.t_gps_s, syn.pseudorange_m, syn.valid, syn.sv,
-                                           rinex_obs.tgd_at(extras, syn.sv, syn.t_gps_s))
+    sat = prm.satellites_at_transmit(eph, syn.t_gps_s, syn.pseudorange_m, syn.valid, syn.sv,
+                                     tgd_at(extras, syn.sv, syn.t_gps_s))
     v = inp["valid"]
     no_sagnac = araim.wnls(np.where(v, inp["pseudorange_m"] + inp["correction_m"], 0.0),
                            sat.ecef_tx_m, 1.0, x0_m=x, valid=v)
@@ -375,7 +376,7 @@ def test_nav_header_without_klobuchar_coefficients(shared_data, tmp_path):
             and "ION BETA" not in ln[60:]]
     nav = tmp_path / "07590920.05n"
     nav.write_text("\n".join(text) + "\n")
-    assert rinex_obs.navigation_extras(nav).alpha is None
+    assert navigation_extras(nav).alpha is None
     study = STUDIES["rinex-replay"]
     params = study.validate({"obs": str(shared_data / "obs" / "07590920.05o"), "nav": str(nav)})
     with pytest.warns(UserWarning, match="no Klobuchar coefficients"):

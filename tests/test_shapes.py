@@ -2,8 +2,9 @@
 ``geometry`` faces export, checked at run time by ``beartype`` in a subprocess (the rest of the
 suite, and every production path, runs the plain functions).
 
-The subprocess installs ``jaxtyping.install_import_hook(["oaraim.araim", "oaraim.geometry"],
-beartype)`` before it imports oaraim, so every function of those packages checks its
+The subprocess installs ``jaxtyping.install_import_hook(["oaraim.araim", "oaraim.geometry",
+"oaraim.readers"], beartype)`` before it imports oaraim (the geometry face re-exports the file
+readers' names, which live in ``oaraim.readers``), so every function of those packages checks its
 arguments and its return against its annotations (named dimensions consistent across the
 arguments of one call). It then calls every annotated exported function with small valid
 inputs (they must pass: a valid call never fails the check), a jitted kernel under ``jax.jit``
@@ -52,7 +53,7 @@ READERS = {"read_yuma", "read_sem", "check_navigation_file", "load_navigation", 
 HOOK = """
 import jaxtyping
 jaxtyping.install_import_hook(
-    ["oaraim.araim", "oaraim.geometry"],
+    ["oaraim.araim", "oaraim.geometry", "oaraim.readers"],
     "beartype.beartype(conf=beartype.BeartypeConf(is_pep484_tower=True))")
 """
 

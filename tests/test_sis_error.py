@@ -8,8 +8,8 @@ import pytest
 
 from oaraim import geometry
 from oaraim.constants import C_M_S, OMEGA_E_GNSS_RAD_S
-from oaraim.geometry import galileo_nav, gpstime, sis_error
-from oaraim.geometry.rinex_clk import ClockFileError, read_clock_rinex
+from oaraim.geometry import sis_error
+from oaraim.readers import ClockFileError, galileo_nav, gpstime, read_clock_rinex
 
 NAV = "obs3/BRDC00IGS_R_20230010000_01D_MN.rnx.gz"
 SP3 = "obs3/COD0MGXFIN_20230010000_01D_05M_ORB.SP3.gz"

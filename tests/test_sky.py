@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from oaraim import araim, geometry
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 MDSCC_ECEF_M = np.array([4849210.0, -360329.7, 4114920.0])  # DESIGN.md corrected y
 DAY_30S = gpstime.gps_seconds(2018, 6, 19) + 30.0 * np.arange(2880)

@@ -28,8 +28,8 @@ def export(lats):
 
     from oaraim import geometry
     from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances
-    from oaraim.geometry.ephemeris import GPS
     from oaraim.geometry.sky import look_angles
+    from oaraim.readers import GPS
     from oaraim.studies import availability_map as am
 
     p = am.AvailabilityMap().validate({})

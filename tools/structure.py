@@ -21,10 +21,10 @@ with ``ast`` and imports nothing, so it also runs on a tree that does not import
   docs/design.md draws): each module belongs to one layer (``layer_of``), and a layer may import
   itself and the layers listed for it, nothing else.
 - A *face bypass* is a module outside one of the ``FACED`` layers (``araim``, ``geometry``,
-  ``sim``, ``mc``) that imports one of that layer's submodules (``from oaraim.araim.mhss import
-  required_order``, ``from oaraim.araim import fde``) or reaches one through the package
-  (``araim.mhss.required_order`` after ``from oaraim import araim``): the package's
-  ``__init__`` is the only way in, so what another layer needs is exported there
+  ``readers``, ``sim``, ``mc``) that imports one of that layer's submodules (``from
+  oaraim.araim.mhss import required_order``, ``from oaraim.araim import fde``) or reaches one
+  through the package (``araim.mhss.required_order`` after ``from oaraim import araim``): the
+  package's ``__init__`` is the only way in, so what another layer needs is exported there
   (``araim.required_order``). A submodule the face itself imports as a module and lists in
   ``__all__`` is a public namespace (``araim.error_models``, ``sim.measurement``) and may be
   used as one. Each finding names the import to write instead.
@@ -83,18 +83,20 @@ LAYERS = {
     "config": set(),                            # oaraim.config: settings read by several layers
     "batching": {"config"},                     # oaraim.batching: tiles, buckets, threads, stores
     "oracles": set(),                           # oaraim.reference*: NumPy/SciPy only
-    "geometry": {"constants", "batching"},
-    "araim": {"geometry", "constants", "config", "batching"},
+    "readers": {"constants"},                   # the files: records and tables as arrays
+    "geometry": {"readers", "constants", "batching"},
+    "araim": {"geometry", "readers", "constants", "config", "batching"},
     "mc": {"config"},
-    "sim": {"araim", "geometry", "constants", "mc", "batching"},  # mc: the named key streams
-    "data": {"geometry"},                       # oaraim.data: the real files, checked
-    "studies": {"araim", "geometry", "mc", "sim", "data", "constants", "config", "batching"},
-    "app": {"studies", "araim", "geometry", "mc", "sim", "data", "constants", "config",
-            "oracles", "batching"},                         # cli, execute, registry, report, bench
+    "sim": {"araim", "geometry", "readers", "constants", "mc", "batching"},  # mc: key streams
+    "data": {"readers"},                        # oaraim.data: the real files, checked
+    "studies": {"araim", "geometry", "readers", "mc", "sim", "data", "constants", "config",
+                "batching"},
+    "app": {"studies", "araim", "geometry", "readers", "mc", "sim", "data", "constants",
+            "config", "oracles", "batching"},   # cli, execute, registry, report, bench
 }
-_SUBPACKAGE_LAYERS = ("geometry", "araim", "mc", "sim", "studies")
+_SUBPACKAGE_LAYERS = ("readers", "geometry", "araim", "mc", "sim", "studies")
 #: the layers whose package ``__init__`` is the only way in for every other layer
-FACED = ("araim", "geometry", "sim", "mc")
+FACED = ("araim", "geometry", "readers", "sim", "mc")
 
 
 def layer_of(module: str) -> str:
@@ -376,6 +378,23 @@ def _exported_function(mods: dict[str, Path], module: str, name: str, depth: int
     return None
 
 
+def _lazy_modules(mods: dict[str, Path], face: str, depth: int = 0) -> set[str]:
+    """The modules whose names a face loads on first use (PEP 562): the strings of its
+    ``__getattr__`` that name one of its submodules, or another face (whose own lazy modules
+    then count: ``geometry`` hands the recording names on to ``readers``)."""
+    if depth > 3 or face not in mods:
+        return set()
+    init = ast.parse(mods[face].read_text())
+    out = set()
+    for c in (c for f in init.body if isinstance(f, ast.FunctionDef) and f.name == "__getattr__"
+              for c in ast.walk(f) if isinstance(c, ast.Constant) and isinstance(c.value, str)):
+        if f"{face}.{c.value}" in mods:
+            out.add(f"{face}.{c.value}")
+        elif c.value in mods and c.value != face:
+            out |= {c.value} | _lazy_modules(mods, c.value, depth + 1)
+    return out
+
+
 def shape_annotations(root: Path = ROOT) -> dict:
     """Per face of ``SHAPED_FACES``: the functions it exports (``__all__``; a name loaded on
     first use is looked up in the face's modules), how many are fully annotated and how many
@@ -386,12 +405,7 @@ def shape_annotations(root: Path = ROOT) -> dict:
         face = f"oaraim.{layer}"
         if face not in mods:
             continue
-        init = ast.parse(mods[face].read_text())
-        # a name loaded on first use (PEP 562): the face's ``__getattr__`` names its module
-        lazy_modules = {f"{face}.{c.value}" for f in init.body
-                        if isinstance(f, ast.FunctionDef) and f.name == "__getattr__"
-                        for c in ast.walk(f)
-                        if isinstance(c, ast.Constant) and isinstance(c.value, str)}
+        lazy_modules = _lazy_modules(mods, face)
         found = {}
         for name in sorted(face_names(root)[face]):
             hit = _exported_function(mods, face, name)

@@ -24,7 +24,8 @@ from oaraim.araim.error_models import (
 )
 from oaraim.constants import C_M_S
 from oaraim.geometry import dual_frequency as dfq
-from oaraim.geometry import rinex_obs
+from oaraim.geometry import pseudorange_model as prm
+from oaraim.readers import navigation_extras, rinex_obs
 
 #: ``signals=single``: the ionosphere of the single-frequency user
 SINGLE_NOTE = ("klobuchar (IS-GPS-200) on GPS L1 and, as a stand-in for NeQuick-G (not "
@@ -112,14 +113,14 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
     alpha = beta = None
     gd_s = np.zeros((n_t, n_s))
     if single:
-        extras = rinex_obs.navigation_extras(nav_path)
+        extras = navigation_extras(nav_path)
         alpha, beta = extras.alpha, extras.beta
         for ch, field in (("G", "TGD"), ("E", "BGDe5b")):
             cols = np.flatnonzero(np.array([s[0] == ch for s in sv])
                                   & np.isin(sv, eph.prns))
             if cols.size:
                 gd_s[:, cols] = np.nan_to_num(eph.record_field(field, t, prns=sv[cols]))
-    sat = rinex_obs.satellites_at_transmit(eph, t, pr, observed, sv, gd_s)
+    sat = prm.satellites_at_transmit(eph, t, pr, observed, sv, gd_s)
     valid = sat.valid
     letters = np.array([s[0] for s in sv])
     present = [k for k, (ch, _) in enumerate(SYSTEMS) if (valid[:, letters == ch]).any()]
@@ -138,14 +139,14 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
                      else araim.error_models.URE_OVER_URA * i.sigma_ura_m)
                     for i in used_isms])[ism_of]
     clock_m = C_M_S * (sat.clock_s - sat.tgd_s)
-    rot, _ = rinex_obs.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
+    rot, _ = prm.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
     sol = araim.wnls(np.where(valid, pr + clock_m, 0.0), np.asarray(rot), 1.0,
                      valid=valid, clock_index=cons, n_clocks=n_clocks)
     x = np.asarray(sol.position_m)
     mask = np.deg2rad(mask_deg)
 
     def terms(x):
-        rt = rinex_obs.receiver_terms(x, sat.ecef_tx_m, t, alpha, beta)
+        rt = prm.receiver_terms(x, sat.ecef_tx_m, t, alpha, beta)
         el = np.asarray(rt.el_rad)
         tropo_m = np.asarray(rt.tropo_m) if tropo == "mops" else np.zeros_like(el)
         v = valid & (el >= mask)

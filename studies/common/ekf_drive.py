@@ -19,7 +19,7 @@ import jax
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry, mc, sim
+from oaraim import mc, readers, sim
 from oaraim.araim import ekf_raim, ekf_replay
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -252,7 +252,7 @@ class EkfDriveStudy(Study):
         onset, tower = p["fault_onset_s"], p["fault_tower"] - 1
         prov = {}
         if p["recording"] != NO_RECORDING:
-            rec = geometry.load_recording(p["recording"])
+            rec = readers.load_recording(p["recording"])
             tr = ekf_replay.replay_ekf_raim(rec, sigma_pr_m=p["filter_sigma_pr_m"] or
                                             p["sigma_pr_m"], cfg=cfg)
             single_src = f"recording {p['recording']} ({rec.meta.get('name', '')})"
@@ -265,8 +265,8 @@ class EkfDriveStudy(Study):
                 duration_s=self._duration(p))
             with tempfile.TemporaryDirectory(prefix="oaraim-drive-") as tmp:
                 folder = Path(p["drive_dir"]) if p["drive_dir"] else Path(tmp) / "drive"
-                geometry.write_recording(folder, rec, overwrite=True)
-                loaded = geometry.load_recording(folder)
+                readers.write_recording(folder, rec, overwrite=True)
+                loaded = readers.load_recording(folder)
                 tr = ekf_replay.replay_ekf_raim(loaded, sigma_pr_m=p["sigma_pr_m"], cfg=cfg)
             single_src = ("synthesized run 0 written with geometry.write_recording, loaded with "
                           "geometry.load_recording, replayed by araim.ekf_replay")

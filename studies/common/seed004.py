@@ -49,7 +49,7 @@ from oaraim.araim import (
 )
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import jit_kernel
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 from oaraim.studies.base import (
     Param,
     check_bpp_annulus,

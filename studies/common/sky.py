@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from oaraim import data
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 from oaraim.studies.base import keyword_or_file
 
 #: 'auto' (the study's default real file), 'nominal' (built-in constellation), or a path

@@ -11,7 +11,8 @@ from oaraim import araim, mc, sim
 from oaraim.araim import BUDGET_SEED004_TABLE_I, required_order, snapshot, solution_separation
 from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import TILE
-from oaraim.geometry import epoch_geometry, gpstime, load_recording
+from oaraim.geometry import epoch_geometry
+from oaraim.readers import gpstime, load_recording
 from oaraim.studies.base import (
     NO_RECORDING,
     Param,

@@ -9,7 +9,7 @@ writes the Galileo week *continuous from the GPS epoch* ("GAL week #, aligned to
 RINEX 3.05 Table A8): the 2023-01-01 records of
 ``BRDC00IGS_R_20230010000_01D_MN`` carry week 2243, the GPS week of that day, not the GST week
 1219 of the navigation message (2243 - 1024). ``gst_week_from_rinex`` is that subtraction. Epochs
-(t_oc, t_oe) are GST; ``geometry.ephemeris`` reads them as GPS time. The two differ by the
+(t_oc, t_oe) are GST; ``readers.navigation`` reads them as GPS time. The two differ by the
 GPS/Galileo time offset (GGTO, a few ns: the file's ``GAGP`` header line gives 4.7 ns on
 2023-01-01), which enters every Galileo clock alike and is removed with the constellation's
 clock datum in ``geometry.sis_error``; orbits move 4 mm/ns, which is negligible.
@@ -26,7 +26,7 @@ I/NAV (``"inav"``). The default (None) keeps both, as before.
 Health (RINEX 3.05 Table A8, 'SV health', bits): 0 E1-B data-validity status (DVS), 1-2 E1-B
 signal health status (SHS), 3 E5a DVS, 4-5 E5a SHS, 6 E5b DVS, 7-8 E5b SHS. DVS 0 = navigation
 data valid, 1 = working without guarantee; SHS 0 = signal OK, 1 = out of service, 2 = extended
-operations mode, 3 = in test (OS SIS ICD 5.1.9.3). ``geometry.ephemeris`` uses a record only
+operations mode, 3 = in test (OS SIS ICD 5.1.9.3). ``geometry.Ephemeris`` uses a record only
 when all its bits are 0.
 
 SISA (OS SIS ICD 5.1.11): the file gives it in metres (the index decoded: 0-0.49 m in 1 cm
@@ -43,7 +43,7 @@ in use.
 import numpy as np
 
 from oaraim.constants import F_E1_HZ, F_E5A_HZ, F_E5B_HZ
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 #: data-source bits (RINEX 3.05 Table A8)
 SRC_INAV_E1B, SRC_FNAV_E5A, SRC_INAV_E5B = 1 << 0, 1 << 1, 1 << 2

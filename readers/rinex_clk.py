@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 
 class ClockFileError(ValueError):

@@ -1,6 +1,6 @@
 """Every observation of a RINEX file, per observation type: ``ObservationTable``.
 
-``geometry.rinex_obs.read_observation_table`` returns one table for one file or several
+``readers.read_observation_table`` returns one table for one file or several
 (hourly files of a day, say): epochs x satellites of every system, one ``(T, S)`` array per
 observation type the header declares (code ``C``, carrier phase ``L``, Doppler ``D``, C/N0
 ``S``; RINEX 3 codes such as ``C1C``, ``C5Q``, ``L2W``; RINEX 2 codes such as ``C1``, ``P2``),

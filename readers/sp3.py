@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 
 
 class SP3Error(ValueError):

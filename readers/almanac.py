@@ -1,19 +1,19 @@
-"""GPS/Galileo almanacs: YUMA and SEM readers and their propagation.
+"""GPS/Galileo almanacs: the YUMA and SEM readers (their propagation: ``geometry.Almanac``).
 
 An almanac holds one reduced Keplerian record per satellite (IS-GPS-200 20.3.3.5.1.2, Table
 20-VI): e, t_oa, i (SEM: delta_i from i_0 = 0.30 semicircles), Omega-dot, sqrt(A), Omega_0
 (the longitude of the ascending node at the weekly epoch), omega, M_0, a_f0, a_f1 and a health
 word. The readers refuse a record whose orbit is not one of its constellation's
-(``geometry.orbit_limits``: semi-major axis, eccentricity, inclination) with the file and
-line. Propagation is the ephemeris algorithm with the harmonic terms, delta_n and IDOT zero
-(IS-GPS-200 20.3.3.5.2.3), through ``geometry.kepler.orbit_ecef``; the almanac clock is
-a_f0 + a_f1 t_k.
+(``readers.orbit_limits``: semi-major axis, eccentricity, inclination) with the file and
+line. The records (``AlmanacRecords``) become orbits in ``oaraim.geometry``
+(``geometry.read_yuma``, ``geometry.read_sem``: the ephemeris algorithm with the harmonic terms,
+delta_n and IDOT zero, IS-GPS-200 20.3.3.5.2.3; the almanac clock a_f0 + a_f1 t_k).
 
 YUMA is the text format of the US Coast Guard NAVCEN (keys ``ID:``, ``Health:``, ... in radians
 and seconds); SEM is NAVCEN's column format (angles in semicircles). Week numbers: YUMA and SEM
 files of GPS usually write the week modulo 1024; they are taken literally unless
 ``week_reference_t_gps_s`` is given, in which case the full week nearest to that time is used
-(``geometry.gpstime.resolve_week``). MAAST's ``almmops.txt`` (week 703: June 1993) is already
+(``readers.gpstime.resolve_week``). MAAST's ``almmops.txt`` (week 703: June 1993) is already
 literal.
 """
 
@@ -22,19 +22,11 @@ import re
 from pathlib import Path
 from typing import NamedTuple
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from oaraim.constants import MU_GAL_M3_S2, MU_GPS_M3_S2
-from oaraim.geometry import gpstime
-from oaraim.geometry.ephemeris import GALILEO, GPS, SYSTEM_NAMES
-from oaraim.geometry.kepler import (
-    GPS_PI,
-    OrbitElements,
-    orbit_ecef,
-)
-from oaraim.geometry.orbit_limits import implausible_orbit
+from oaraim.constants import GPS_PI
+from oaraim.readers import gpstime
+from oaraim.readers.orbit_limits import implausible_orbit
 
 
 class AlmanacFileError(ValueError):
@@ -59,70 +51,6 @@ class AlmanacRecords(NamedTuple):
     af1_s_s: np.ndarray
 
 
-class Almanac:
-    """Satellites of an almanac or a nominal constellation (one Keplerian record each).
-
-    ``sat_position_ecef(t_gps_s, prns=None)`` has the signature of ``Ephemeris``'s: it returns
-    ``(ecef (T, S, 3), valid (T, S), prns (S,))`` where valid is the health word == 0.
-    """
-
-    def __init__(self, records: AlmanacRecords, system: int, name: str):
-        self.records = records
-        self.system = int(system)
-        self.name = name
-        letter = "G" if system == GPS else "E"
-        self.prns = np.array([f"{letter}{int(p):02d}" for p in records.prn])
-        self.prn_number = np.asarray(records.prn, np.int32)
-        self.constellation = np.full(self.prns.size, system, np.int32)
-        self.sat_healthy = np.asarray(records.health) == 0
-        mu = MU_GAL_M3_S2 if system == GALILEO else MU_GPS_M3_S2
-        r = records
-        z = np.zeros(self.prns.size)
-        self._elements = OrbitElements(
-            toe_s=r.toa_s, toe_tow_s=r.toa_tow_s, sqrt_a=r.sqrt_a, e=r.e, i0_rad=r.i_rad,
-            idot_rad_s=z, omega0_rad=r.omega0_rad, omegadot_rad_s=r.omegadot_rad_s,
-            omega_rad=r.omega_rad, m0_rad=r.m0_rad, delta_n_rad_s=z, cuc_rad=z, cus_rad=z,
-            crc_m=z, crs_m=z, cic_rad=z, cis_rad=z, mu_m3_s2=np.full(z.shape, mu))
-
-    def __repr__(self):
-        return (f"Almanac({self.name}: {self.prns.size} {SYSTEM_NAMES[self.system]} satellites, "
-                f"{int(np.sum(~self.sat_healthy))} unhealthy)")
-
-    def _select(self, prns):
-        if prns is None:
-            return np.arange(self.prns.size)
-        where = {p: k for k, p in enumerate(self.prns)}
-        missing = [str(p) for p in np.atleast_1d(prns) if str(p) not in where]
-        if missing:
-            raise ValueError(f"prns {missing} are not in {self.name}; available: "
-                             f"{', '.join(self.prns)}")
-        return np.array([where[str(p)] for p in np.atleast_1d(prns)])
-
-    def sat_position_ecef(self, t_gps_s, prns=None):
-        """``(ecef (T, S, 3) metres, valid (T, S), prns (S,))`` at GPS times ``t_gps_s`` (T,),
-        as ``Ephemeris.sat_position_ecef``: Keplerian propagation of each almanac record (no
-        harmonic corrections), ECEF at time t; valid is health == 0, invalid entries hold 0.
-        ``prns`` selects satellites by name (default: all)."""
-        idx = self._select(prns)
-        el = OrbitElements(*(jnp.asarray(np.asarray(x)[idx]) for x in self._elements))
-        t = jnp.atleast_1d(jnp.asarray(t_gps_s, jnp.float64))
-        ecef = _almanac_ecef(el, t)
-        valid = jnp.broadcast_to(jnp.asarray(self.sat_healthy[idx]), ecef.shape[:-1])
-        return jnp.where(valid[..., None], ecef, 0.0), valid, self.prns[idx]
-
-    def clock_s(self, t_gps_s):
-        """Almanac clock a_f0 + a_f1 (t - t_oa), ``(T, S)`` seconds."""
-        t = np.atleast_1d(np.asarray(t_gps_s, np.float64))[:, None]
-        return self.records.af0_s + self.records.af1_s_s * (t - self.records.toa_s)
-
-
-@jax.jit
-def _almanac_ecef(el, t):
-    el_b = OrbitElements(*(x[None, :] for x in el))
-    ecef, _ = orbit_ecef(el_b, t[:, None])
-    return ecef
-
-
 #: what each almanac field must satisfy (a record breaking one is a parse error naming the
 #: file and line): e in [0, 1) (an orbit), sqrt(A) > 0, integers in their ranges where the
 #: format has them (RINEX 3 satellite numbers have two digits; the almanac health is 8 bits)
@@ -138,7 +66,7 @@ _FIELD_RULES = {"e": (lambda v: 0.0 <= v < 1.0, "in [0, 1) (an elliptical orbit)
 
 def _check_rows(p, rows, lines_of, system):
     """AlmanacFileError (file, line) for a non-finite or unphysical value, an orbit that is
-    not one of ``system``'s ('G', 'E': ``geometry.orbit_limits``) or a PRN given twice.
+    not one of ``system``'s ('G', 'E': ``readers.orbit_limits``) or a PRN given twice.
     ``lines_of(i, key)``: the line of field ``key`` of record ``i``."""
     seen = {}
     for i, r in enumerate(rows):
@@ -191,9 +119,10 @@ def _yuma_key(label):
     return None
 
 
-def read_yuma(path: str | os.PathLike, system: str = "G",
-              week_reference_t_gps_s: float | None = None) -> Almanac:
-    """Read a YUMA almanac. ``system``: 'G' (GPS) or 'E' (Galileo, e.g. MAAST's ED-259 file).
+def read_yuma_records(path: str | os.PathLike, system: str = "G",
+                      week_reference_t_gps_s: float | None = None) -> AlmanacRecords:
+    """The records of a YUMA almanac (``geometry.read_yuma`` makes the orbits of them).
+    ``system``: 'G' (GPS) or 'E' (Galileo, e.g. MAAST's ED-259 file).
 
     The satellite number is taken from the block header ('PRN-01', 'SVID- 1') when present,
     else from ``ID:``. Health: the 3-digit health field (0 = healthy).
@@ -254,13 +183,12 @@ def read_yuma(path: str | os.PathLike, system: str = "G",
                                "Week ... almanac for PRN-nn ********') up to the end of the "
                                "file; not a YUMA almanac")
     _check_rows(p, rows, lambda i, key: row_lines[i].get(key, "?"), system)
-    return Almanac(_records(rows, system, week_reference_t_gps_s),
-                   GPS if system == "G" else GALILEO, p.name)
+    return _records(rows, system, week_reference_t_gps_s)
 
 
-def read_sem(path: str | os.PathLike, system: str = "G",
-             week_reference_t_gps_s: float | None = None) -> Almanac:
-    """Read a SEM almanac (NAVCEN ``.al3``): angles in semicircles, inclination as delta_i
+def read_sem_records(path: str | os.PathLike, system: str = "G",
+                     week_reference_t_gps_s: float | None = None) -> AlmanacRecords:
+    """The records of a SEM almanac (NAVCEN ``.al3``): angles in semicircles, inclination as delta_i
     from 0.30 semicircles (GPS). Layout: count and title; week and t_oa; then per satellite
     PRN, SVN, URA, (e, delta_i, Omega-dot), (sqrt A, Omega_0, omega), (M_0, a_f0, a_f1),
     health, configuration (8 lines), separated by blank lines."""
@@ -319,5 +247,4 @@ def read_sem(path: str | os.PathLike, system: str = "G",
                 "m0": 5, "af0": 5, "af1": 5, "health": 6}
     _check_rows(p, rows, lambda i, key: starts[i][sem_line[key]] if key in sem_line
                 else tokens[1][0], system)
-    return Almanac(_records(rows, system, week_reference_t_gps_s),
-                   GPS if system == "G" else GALILEO, p.name)
+    return _records(rows, system, week_reference_t_gps_s)

@@ -8,7 +8,7 @@ CRINEX line the decoder stopped at). Errors inside the decoded text name lines o
 day): ``read_observation_table([a, b, ...])``.
 
 ``read_observation_table``: every observation of every system and type the header declares
-(``geometry.observation_table.ObservationTable``: GPS, Galileo, BeiDou, GLONASS, QZSS, SBAS,
+(``readers.ObservationTable``: GPS, Galileo, BeiDou, GLONASS, QZSS, SBAS,
 NavIC; code, carrier, Doppler, C/N0), NaN where blank.
 
 Reading (``read_observations``): our own reader of the RINEX 2.11 / 3.04 observation format
@@ -24,9 +24,9 @@ L1 code pseudoranges (RINEX 2: C1, gaps filled from P1; RINEX 3: C1C, then C1W /
 and the header's APPROX POSITION XYZ. ``read_observations`` keeps GPS only (the L1 replay);
 Galileo E1 needs its own group delay (BGD), the later dual-frequency replay's work.
 
-The GNSS pseudorange model of real-data replay (navigation extras, transmit-time satellite
-states, Sagnac, receiver terms) is ``geometry.pseudorange_model``; its names are re-exported
-here, where the replay has always found them.
+The GNSS pseudorange model of real-data replay (transmit-time satellite states, Sagnac,
+receiver terms) is ``geometry.pseudorange_model``; the navigation extras it takes (Klobuchar
+coefficients, T_GD) are read by ``readers.navigation_extras``.
 """
 
 import datetime
@@ -41,18 +41,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.geometry import rinex_text
-from oaraim.geometry.observation_table import ObservationTable, decode_fields, merge_tables
-from oaraim.geometry.pseudorange_model import (  # noqa: F401  (re-exported: the replay's API)
-    NavigationExtras,
-    ReceiverTerms,
-    SatellitesAtTransmit,
-    navigation_extras,
-    receiver_terms,
-    sagnac_rotate,
-    satellites_at_transmit,
-    tgd_at,
-)
+from oaraim.readers import rinex_text
+from oaraim.readers.observation_table import ObservationTable, decode_fields, merge_tables
 
 #: L1 code observables in order of preference (RINEX 2.11 section 5.1; RINEX 3.03 5.2.17)
 RINEX2_L1_CODES = ("C1", "P1")
@@ -116,7 +106,7 @@ class _Bad(Exception):
 
 
 def _read_lines(path: Path) -> rinex_text.RinexText:
-    """The file's lines in any form (``geometry.rinex_text``), whether it ends with a line
+    """The file's lines in any form (``readers.rinex_text``), whether it ends with a line
     break, whether it was CRINEX (the lines are then those of the decoded text) and what the
     CRINEX decoder skipped."""
     return rinex_text.read_lines(path, ObservationFileError)

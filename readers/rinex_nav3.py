@@ -1,6 +1,6 @@
 """RINEX 3 navigation records read by field position (RINEX 3.05 Tables A6-A16).
 
-Why not georinex (the RINEX 2 parser of ``geometry.ephemeris``): a navigation record is a fixed
+Why not georinex (the RINEX 2 parser of ``readers.navigation``): a navigation record is a fixed
 grid of 19-column fields, and RINEX 3 lets a writer leave an optional or spare field blank or
 fill it, and cut a line after its last written field. Merged files (the IGS ``BRDC00IGS``
 daily file) mix records from several contributors, so one satellite's records differ in these
@@ -14,7 +14,7 @@ Here each field is read at its own columns (record line j, field i: columns 4 + 
 j >= 1, 23 + 19 i of the first line), whatever the line length, and a blank field is NaN: the
 layout of a record carries no meaning, its values do. The structural and semantic checks
 (numbers where numbers belong, required orbital elements, times, duplicates) are
-``geometry.ephemeris.check_navigation_file``'s; this module assumes a checked text.
+``readers.check_navigation_file``'s; this module assumes a checked text.
 """
 
 import datetime

@@ -1,7 +1,7 @@
-"""The loader's rules for recordings (``geometry.recording``): the table specifications, the
+"""The loader's rules for recordings (``readers.recording``): the table specifications, the
 checks of meta.json, of each table and across tables, and the errors they raise. Each problem
 raises :class:`RecordingError` naming file, column and row with a one-line fix; the format
-itself is described in ``geometry.recording``."""
+itself is described in ``readers.recording``."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from oaraim.geometry.transmitters import MIN_SEPARATION_M, first_near_pair
+from oaraim.readers.transmitters import MIN_SEPARATION_M, first_near_pair
 
 FORMAT_NAME = "oaraim-recording"
 FORMAT_VERSION = 1
@@ -327,7 +327,7 @@ def check_table(name: str, df: Any, where: Where) -> pd.DataFrame:
             order = "strictly increasing" if spec.time == "strict" else "non-decreasing"
             raise where.err(f"t_s = {float(t[r])!r} s is earlier than {float(t[r - 1])!r} s on "
                             f"the row before; t_s must be {order}", "Sort the table by t_s (e.g. "
-                            "geometry.recording.sort_recording, or df.sort_values('t_s', "
+                            "readers.sort_recording, or df.sort_values('t_s', "
                             "kind='stable'))", column="t_s", row=r)
     if spec.key is not None:
         dup = df.duplicated(list(spec.key), keep="first").to_numpy()
