@@ -24,7 +24,7 @@ JPL convention, their eqs. 187-197; the seed's refs. [33-36]):
     theta'  = -[w_hat x] theta - b_g~ - n_g
     r~'     = v~
     v~'     = -C^T(q_hat) [a_hat x] theta - C^T(q_hat) b_a~ - C^T(q_hat) n_a
-    b~'     = -b~ / tau + n_b                    (first-order Gauss-Markov biases, geometry.imu)
+    b~'     = -b~ / tau + n_b                    (first-order Gauss-Markov biases, errors.imu)
     x_clk~' = [[0, 1], [0, 0]] x_clk~ + w_clk    (seed 000 eq. 1)
 with w_hat = w_m - b_g_hat, a_hat = a_m - b_a_hat. The IMU noises are isotropic, so
 C^T n_a has the same covariance as n_a.
@@ -97,7 +97,7 @@ class EkfParams(NamedTuple):
 
 def params_from_imu(spec, dt_s, gravity, s_wdt_s=S_WDT_OCXO_S,
                     s_wdtdot_per_s=S_WDTDOT_OCXO_PER_S) -> EkfParams:
-    """Filter model matched to a ``geometry.imu.ImuSpec`` (the truth model of the synthesis)."""
+    """Filter model matched to an ``errors.ImuSpec`` (the truth model of the synthesis)."""
     return EkfParams(
         dt_s=float(dt_s), gravity=jnp.asarray(gravity, jnp.float64),
         gyro_psd=spec.gyro_noise_rad_s_sqrt_hz**2, accel_psd=spec.accel_noise_m_s2_sqrt_hz**2,

@@ -39,7 +39,7 @@ from jaxtyping import Array, Bool, Float, Real
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
-from oaraim.geometry import imu
+from oaraim.errors import imu
 
 
 class RaimConfig(NamedTuple):

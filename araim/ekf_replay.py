@@ -16,7 +16,7 @@ through.
 Replay rules (what a recording must satisfy beyond the loader's checks):
 
 - IMU time stamps are the END of each sample's interval (the sample is the interval mean of the
-  angular rate and specific force, as ``geometry.imu`` synthesizes and as most IMUs output); the
+  angular rate and specific force, as ``errors.imu`` synthesizes and as most IMUs output); the
   step is uniform (every step within 1 % of the median, which is the ``dt`` the filter uses).
 - Pseudorange epochs lie on IMU time stamps (within 1 % of a step) and on a regular grid of n IMU
   steps (n = the median epoch step / IMU step, rounded). A missing epoch inside the grid becomes
@@ -38,7 +38,7 @@ Replay rules (what a recording must satisfy beyond the loader's checks):
 - The navigation frame is the local ENU frame of ``meta.json``'s origin, flat and non-rotating
   with WGS-84 normal gravity at the origin (as the synthesized drives; over 1-2 km the neglected
   Earth rate, 7.3e-5 rad/s, and frame curvature are far below the VN-100 gyro noise).
-- IMU noise model of the filter: ``spec`` (default ``geometry.imu.vn100()``), or meta.json's
+- IMU noise model of the filter: ``spec`` (default ``errors.imu.vn100()``), or meta.json's
   ``"imu_spec"`` object with the ``ImuSpec`` fields (synthesized recordings write it).
 """
 
@@ -54,7 +54,8 @@ from oaraim.araim import ekf as _ekf
 from oaraim.araim import ekf_raim as _er
 from oaraim.araim import filter_monitor as _fm
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
-from oaraim.geometry import frames, imu, recording_frame
+from oaraim.errors import imu
+from oaraim.geometry import frames, recording_frame
 from oaraim.readers import recording
 
 #: tolerance, in IMU steps, for uniform IMU stamps and for epochs lying on IMU stamps

@@ -18,7 +18,7 @@ What it does, step by step (each step a public function of its own layer):
    fault-mode conventions' limit on sources (``add-v4.2``: 52) counts sources in view, not
    the satellites of the file.
 4. The ISM values of each constellation (``Ism``: sigma_URA, sigma_URE, b_nom, P_sat,
-   P_const), the airborne error model of ``error_models.AIRBORNE_MODELS`` and
+   P_const), the airborne error model of ``errors.AIRBORNE_MODELS`` and
    ``protection_levels`` under the budget and convention given.
 """
 
@@ -30,10 +30,10 @@ from jax.typing import ArrayLike
 from jaxtyping import Real
 
 from oaraim.araim.budget import BUDGET_LPV200, IntegrityBudget
-from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, FaultModeRule, fault_mode_rule
 from oaraim.araim.mhss import MHSSResult, protection_levels
 from oaraim.araim.validate import check_range
+from oaraim.errors import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.geometry import (
     ephemeris_gaps,
     geodetic_to_ecef,

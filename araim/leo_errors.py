@@ -34,8 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim.epoch import Ism
-from oaraim.araim.error_models import F_L1_HZ, sigma_multipath_m, sigma_tropo_m
-from oaraim.geometry.atmosphere import iono_obliquity
+from oaraim.errors import F_L1_HZ, iono_obliquity, sigma_multipath_m, sigma_tropo_m
 
 #: DO-229 J.2.3 vertical Klobuchar residual at GPS L1, mid geomagnetic latitudes (m)
 KLOBUCHAR_TAU_VERT_MID_M = 4.5

@@ -87,12 +87,13 @@ def __getattr__(name):
     raise AttributeError(f"module 'oaraim.geometry' has no attribute {name!r}")
 
 
-from oaraim.geometry import clocks, imu  # noqa: E402
-from oaraim.geometry.imu import ImuSpec, vn100  # noqa: E402
+# the IMU model and the atmosphere live in oaraim.errors; their names stay here for users
+from oaraim.errors import ImuSpec, imu, vn100  # noqa: E402
+from oaraim.geometry import clocks  # noqa: E402
 
 __all__ += ["ImuSpec", "clocks", "imu", "vn100"]
 
-from oaraim.geometry import atmosphere  # noqa: E402
+from oaraim.errors import atmosphere  # noqa: E402
 from oaraim.readers import (  # noqa: E402  (moved: kept importable from here)
     ObservationFileError,
     Observations,

@@ -13,8 +13,8 @@ Pseudorange model of one L1 code measurement (IS-GPS-200, sections cited inline)
 * Sagnac / Earth rotation during the transit (IS-GPS-200 20.3.3.4.3.4): the transmit-time
   position is rotated into the frame of the reception time by -Omega_e tau, with the travel
   time tau = |x - R3 s| / c iterated from the receiver position estimate;
-* I_L1: Klobuchar (``geometry.atmosphere.klobuchar_delay_m``) from the navigation header's
-  alpha / beta; T: RTCA MOPS troposphere (``geometry.atmosphere.tropo_delay_m``).
+* I_L1: Klobuchar (``errors.atmosphere.klobuchar_delay_m``) from the navigation header's
+  alpha / beta; T: RTCA MOPS troposphere (``errors.atmosphere.tropo_delay_m``).
 
 The receiver-position-dependent parts (Sagnac, elevation, atmosphere) are pure functions of a
 position estimate (``receiver_terms``); the caller iterates them with its solver
@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.constants import C_M_S
-from oaraim.geometry import atmosphere
+from oaraim.errors import atmosphere
 from oaraim.geometry.frames import (
     az_el_from_rotation,
     earth_rotation_correction,

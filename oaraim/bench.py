@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim import geometry, reference, reference_mhss
+from oaraim import errors, geometry, reference, reference_mhss
 from oaraim.araim import lambda_det_table, slope_hpl_tiled
 
 
@@ -102,15 +102,14 @@ def bench_fig3(realizations=1_000_000):
 def mhss_bench_inputs(n, seed=0, n_gps=9, n_sop=4, sigma_ura_sop_m=3.0, p_sat_sop=1e-4):
     """The issue-3 benchmark case: 9 GPS (5 deg mask, ADD error models, Table I) + 4 BPP SOPs in
     one SOP constellation (sigma_URA^S = 3 m, P_s^S = 1e-4, P_const^S = 1e-4, b_nom 0)."""
-    from oaraim import araim
 
     k1, k2 = jax.random.split(jax.random.key(seed))
     az, el = geometry.random_sky(k1, n_gps, np.deg2rad(5.0), (n,))
     t = geometry.bpp_towers(k2, n_sop, 5.0, 3000.0, 0.0, 0.0, (n,))
     g = geometry.geometry_rows(jnp.concatenate([az, t.az_rad], -1),
                                jnp.concatenate([el, t.el_rad], -1))
-    vi, va = araim.error_models.gnss_variances(el)
-    si, sa = araim.error_models.sop_variances(jnp.full((n, n_sop), sigma_ura_sop_m))
+    vi, va = errors.gnss_variances(el)
+    si, sa = errors.sop_variances(jnp.full((n, n_sop), sigma_ura_sop_m))
     L = n_gps + n_sop
     shape = (n, L)
     return dict(
@@ -126,13 +125,12 @@ def blanch_2012_inputs(n, seed=1):
     """n random 5 GPS + 5 Galileo skies with the inputs of Blanch et al. 2012 Appendix J
     (P_sat 1e-4, P_const 1e-4, b_nom 0.5 m, ADD error models): under ``blanch-2012`` each
     monitors 57 modes (10 satellites, 45 pairs, 2 constellations)."""
-    from oaraim import araim
 
     k1, k2 = jax.random.split(jax.random.key(seed))
     az1, el1 = geometry.random_sky(k1, 5, np.deg2rad(5.0), (n,))
     az2, el2 = geometry.random_sky(k2, 5, np.deg2rad(5.0), (n,))
     az, el = jnp.concatenate([az1, az2], -1), jnp.concatenate([el1, el2], -1)
-    vi, va = araim.error_models.gnss_variances(el, 0.75)
+    vi, va = errors.gnss_variances(el, 0.75)
     shape = (n, 10)
     return dict(g=geometry.geometry_rows(az, el),
                 constellation=jnp.broadcast_to(jnp.array([0] * 5 + [1] * 5), shape),

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim import geometry, reference_mhss
+from oaraim import errors, geometry, reference_mhss
 
 #: (L, fault-mode convention) of the rows
 LEO_CASES = ((20, "add-v4.2"), (40, "add-v4.2"), (52, "add-v4.2"), (60, "grouped"))
@@ -31,7 +31,7 @@ def leo_inputs(n, L, seed=0):
     k1, k2 = jax.random.split(jax.random.key(seed))
     az_g, el_g = geometry.random_sky(k1, N_GNSS, np.deg2rad(5.0), (n,))
     az_l, el_l = geometry.random_sky(k2, L - N_GNSS, np.deg2rad(25.0), (n,))
-    vi, va = araim.error_models.gnss_variances(el_g)
+    vi, va = errors.gnss_variances(el_g)
     vl, val = araim.leo_variances(el_l, araim.LEO_ISM["estimated"], araim.LEO_SIGNALS["starlink"])
     labels = jnp.array([0] * (N_GNSS // 2) + [1] * (N_GNSS // 2) + [2] * (L - N_GNSS))
     shape = (n, L)

@@ -16,6 +16,8 @@ if __name__ != "oaraim.sim":  # the source folder is importable from the checkou
     raise ImportError(f"import oaraim.sim, not {__name__}: the folder sim/ installs as "
                       "oaraim.sim (pip install -e .), which also enables JAX's float64 mode")
 
+# the world's error parameters live in oaraim.errors (errors.world); sim draws them
+from oaraim.errors import ErrorModel, GnssErrorModel
 from oaraim.sim import drive, gnss, measurement, recordings, trajectory
 from oaraim.sim.drive import (
     DriveSetup,
@@ -28,7 +30,6 @@ from oaraim.sim.drive import (
     simulate_drive,
 )
 from oaraim.sim.gnss import (
-    GnssErrorModel,
     SnapshotWorld,
     epoch_times,
     gnss_errors,
@@ -41,7 +42,6 @@ from oaraim.sim.measurement import (
     EpochMeasurements,
     EpochTowers,
     EpochTruth,
-    ErrorModel,
     ReceiverSensors,
     WorldState,
     calibrate,

@@ -26,12 +26,12 @@ from oaraim.araim.ekf_raim import (
     raim_tables,
     raim_update,
 )
-from oaraim.geometry import clocks, imu
+from oaraim.errors import ErrorModel, imu
+from oaraim.geometry import clocks
 from oaraim.sim import trajectory
 from oaraim.sim.measurement import (
     EpochTowers,
     EpochTruth,
-    ErrorModel,
     ReceiverSensors,
     WorldState,
     calibrate,

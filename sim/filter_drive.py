@@ -27,9 +27,10 @@ import jax.numpy as jnp
 from oaraim import araim
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.ekf_raim import raim_init, raim_update
+from oaraim.errors import ErrorModel
 from oaraim.sim.drive import DriveSetup, filter_sigma, initial_draw
 from oaraim.sim.faults import FaultScenario, fault_profile_m
-from oaraim.sim.measurement import EpochTowers, EpochTruth, ErrorModel, drive_epoch
+from oaraim.sim.measurement import EpochTowers, EpochTruth, drive_epoch
 
 __all__ = ["DEFAULT_CONFIG", "MONITORS", "FilterDriveConfig", "FilterDriveSummary",
            "FilterDriveTrace", "gm_overbound_variance", "simulate_filter_drive"]

@@ -35,13 +35,13 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from oaraim.araim import error_models
+from oaraim import errors
 from oaraim.constants import C_M_S
+from oaraim.errors import ErrorModel, GnssErrorModel
 from oaraim.geometry import EpochGeometry, frames, look_angles, satellites
 from oaraim.mc import stream
 from oaraim.readers import FORMAT_NAME, FORMAT_VERSION, Recording, gpstime, validate_recording
 from oaraim.sim.measurement import (
-    ErrorModel,
     gauss_markov_step,
     pseudorange_from_range,
     sop_errors,
@@ -50,44 +50,6 @@ from oaraim.sim.trajectory import Scenario
 
 #: synthesized receiver clock (illustrative: a 1 km offset and a 0.3 m/s drift)
 RX_CLOCK_BIAS_M, RX_CLOCK_DRIFT_MPS = 1000.0, 0.3
-
-
-class GnssErrorModel(NamedTuple):
-    """The GNSS pseudorange errors of the mixed GNSS + SOP studies' truth
-    (docs/error-world.md): consistent with, but not identical to, the ADD models the protection
-    levels assume (``araim.error_models``: Gaussian, white, sigma_URA for integrity). Each term is a
-    first-order Gauss-Markov process per satellite (stationary start), plus a constant bias:
-
-    * clock and ephemeris: sigma ``ure_over_ura`` x sigma_URA (the ADD's accuracy value,
-      2/3), correlation time ``ure_tau_s``;
-    * nominal bias: a constant per satellite and draw, uniform in +-``b_nom_m`` (the ADD's
-      integrity b_nom is 0.75 m; the PL of seed 001 assumes none);
-    * troposphere residual: sigma_tropo(el) (RTCA DO-229 / ADD), correlation time
-      ``tropo_tau_s``;
-    * ionosphere residual: ``sigma_iono_m`` (0: dual-frequency iono-free, seed 004 App. A);
-    * multipath: ``mp_scale`` x the ADD airborne multipath sigma(el) x the iono-free factor,
-      correlation time ``mp_tau_s``; receiver noise white, the ADD noise sigma(el) x the
-      iono-free factor.
-    """
-
-    #: sigma_URE / sigma_URA (ADD convention, DESIGN.md: 2/3)
-    ure_over_ura: float = error_models.URE_OVER_URA
-    #: correlation time of the clock and ephemeris error, s (open; 1800 s, our choice: orbit
-    #: and clock errors change over tens of minutes)
-    ure_tau_s: float = 1800.0
-    #: half-width of the uniform nominal bias per satellite, m (ADD b_nom for integrity 0.75 m;
-    #: our truth draws within it)
-    b_nom_m: float = 0.75
-    #: correlation time of the troposphere residual, s (Joerger and Pervan's bounds are
-    #: 900-2700 s, NAVIGATION, "multipath and troposphere error models" table: the middle)
-    tropo_tau_s: float = 1800.0
-    #: ionosphere residual 1-sigma, m (0: iono-free dual frequency, seed 004 App. A)
-    sigma_iono_m: float = 0.0
-    #: multipath sigma relative to the ADD airborne model (1: airborne; a car sees more: open)
-    mp_scale: float = 2.0
-    #: multipath correlation time, s (Joerger and Pervan's lower bound for code multipath,
-    #: 10 s; a moving car decorrelates fast)
-    mp_tau_s: float = 10.0
 
 
 def gnss_errors(key, t_s, el_rad, sigma_ura_m, gm: GnssErrorModel):
@@ -99,7 +61,7 @@ def gnss_errors(key, t_s, el_rad, sigma_ura_m, gm: GnssErrorModel):
     k0 = stream(key, "world_gnss")
     w0 = jax.random.normal(jax.random.fold_in(k0, n_t), (4, n_l))
     b = gm.b_nom_m * (2.0 * jax.random.uniform(jax.random.fold_in(k0, n_t + 1), (n_l,)) - 1.0)
-    iff = error_models.iono_free_factor()
+    iff = errors.iono_free_factor()
     s_ure = gm.ure_over_ura * sigma_ura_m * jnp.ones(n_l)
     x0 = jnp.stack([s_ure * w0[0], w0[1], gm.sigma_iono_m * w0[2], w0[3]])
     dts = jnp.diff(t_s, prepend=t_s[0])
@@ -112,9 +74,9 @@ def gnss_errors(key, t_s, el_rad, sigma_ura_m, gm: GnssErrorModel):
                        gauss_markov_step(x[1], w[1], 1.0, gm.tropo_tau_s, dt),
                        gauss_markov_step(x[2], w[2], gm.sigma_iono_m, gm.ure_tau_s, dt),
                        gauss_markov_step(x[3], w[3], 1.0, gm.mp_tau_s, dt)])
-        err = (b + x[0] + error_models.sigma_tropo_m(el) * x[1] + x[2]
-               + gm.mp_scale * iff * error_models.sigma_multipath_m(el) * x[3]
-               + iff * error_models.sigma_noise_m(el) * w[4])
+        err = (b + x[0] + errors.sigma_tropo_m(el) * x[1] + x[2]
+               + gm.mp_scale * iff * errors.sigma_multipath_m(el) * x[3]
+               + iff * errors.sigma_noise_m(el) * w[4])
         return x, err
 
     _, y = jax.lax.scan(body, x0, (jnp.arange(n_t), dts, el_rad))

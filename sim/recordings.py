@@ -16,10 +16,11 @@ import pandas as pd
 
 from oaraim.araim.ekf_raim import InitialUncertainty
 from oaraim.constants import C_M_S
-from oaraim.geometry import frames, imu
+from oaraim.errors import ErrorModel, imu
+from oaraim.geometry import frames
 from oaraim.readers import recording
 from oaraim.sim.drive import DriveSetup, drive_setup, filter_sigma, initial_draw
-from oaraim.sim.measurement import EpochTowers, EpochTruth, ErrorModel, drive_epoch
+from oaraim.sim.measurement import EpochTowers, EpochTruth, drive_epoch
 from oaraim.sim.trajectory import Scenario
 
 

@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim.constants import STANDARD_GRAVITY_MPS2
+from oaraim.errors import ErrorModel
 from oaraim.geometry import normal_gravity_mps2
-from oaraim.sim.measurement import ErrorModel
 
 
 class Segment(NamedTuple):

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, geometry, mc, readers
+from oaraim import araim, errors, geometry, mc, readers
 from oaraim.studies.base import (
     Param,
     ResumableStudy,
@@ -104,7 +104,7 @@ def _sources(d, n, sigma, log10_p_s, p_const_leo, signal):
     P_s: differentiable)."""
     el = jnp.where(d["valid"], d["el"], jnp.pi / 2)
     is_gps = d["code"] == 0
-    vi_g, va_g = araim.error_models.gnss_variances(el, 1.0)
+    vi_g, va_g = errors.gnss_variances(el, 1.0)
     k = d["az_l"].shape[-1]
     use = d["valid_l"] & (jnp.arange(k) < n)
     ism = araim.Ism(sigma, 2.0 / 3.0 * sigma, 0.0, 0.0, 0.0)

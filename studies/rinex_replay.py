@@ -25,7 +25,7 @@ Choices (none of them tuned on the results):
 * Nominal error model of a single-frequency L1 user (variances add, seed 004 App. A):
   C_int = sigma_URA^2 + sigma_iono^2 + sigma_tropo^2 + sigma_user^2 with sigma_iono of RTCA
   DO-229 J.2.3 for the Klobuchar model (max(delay / 5, F_pp tau_vert)), sigma_tropo the MOPS
-  0.12 m m(E) (``araim.error_models.sigma_tropo_m``), sigma_user the ADD's L1 noise and
+  0.12 m m(E) (``errors.sigma_tropo_m``), sigma_user the ADD's L1 noise and
   multipath curves without the dual-frequency factor; C_acc the same with sigma_URE = 2/3
   sigma_URA. WNLS and slope RAIM weight with C_int^-1.
 * Chi-square slope RAIM: P_FA = 1e-5, P_MD = 1e-3 (as our seed 001 studies).
@@ -50,10 +50,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, data, geometry
+from oaraim import araim, data, errors, geometry
 from oaraim.araim import required_order, snapshot
-from oaraim.araim.error_models import sigma_multipath_m, sigma_noise_m
 from oaraim.constants import C_M_S
+from oaraim.errors import sigma_multipath_m, sigma_noise_m
 from oaraim.geometry import pseudorange_model as prm
 from oaraim.readers import gpstime, navigation_extras, rinex_obs, tgd_at
 from oaraim.studies.base import (
@@ -211,7 +211,7 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
         iono_m = np.asarray(rt.iono_m)
         tropo_m = np.asarray(rt.tropo_m) if tropo == "mops" else np.zeros_like(el)
         v = valid & (el >= mask)
-        var_int, var_acc = araim.error_models.gnss_variances(
+        var_int, var_acc = errors.gnss_variances(
             el, sigma_ura_m, sigma_iono_m=rt.sigma_iono_m, user_model=user_sigma_l1_m)
         var_int, var_acc = np.asarray(var_int), np.asarray(var_acc)
         corr = clock_m - tgd_m - iono_m - tropo_m
@@ -224,7 +224,7 @@ def gnss_replay_inputs(obs, ephemeris, extras, *, mask_deg=5.0, sigma_ura_m=1.0,
     iono_m = np.asarray(rt.iono_m)
     tropo_m = np.asarray(rt.tropo_m) if tropo == "mops" else np.zeros_like(el)
     v = valid & (el >= mask)
-    var_int, var_acc = araim.error_models.gnss_variances(
+    var_int, var_acc = errors.gnss_variances(
         el, sigma_ura_m, sigma_iono_m=rt.sigma_iono_m, user_model=user_sigma_l1_m)
     z = lambda a: np.where(valid, np.asarray(a), 0.0)  # noqa: E731
     return {

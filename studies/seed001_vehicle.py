@@ -35,7 +35,7 @@ import xarray as xr
 
 from oaraim import geometry, mc, sim
 from oaraim.araim import snapshot
-from oaraim.araim.error_models import gnss_variances
+from oaraim.errors import gnss_variances
 from oaraim.geometry import epoch_geometry
 from oaraim.readers import gpstime, load_recording
 from oaraim.studies.base import (

@@ -35,8 +35,8 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim import Sources, Status, fault_mode_rule, separation_kernel
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import jit_kernel
+from oaraim.errors import gnss_variances, sop_variances
 from oaraim.mc import Count, Max, Mean, Min
 from oaraim.studies.base import Param, StudyResult, SweepStudy, axis, count, fault_modes_param
 from oaraim.studies.common import seed004 as c

@@ -10,14 +10,14 @@ from typer.testing import CliRunner
 
 from oaraim import geometry
 from oaraim.araim import availability as av
-from oaraim.araim.error_models import (
+from oaraim.cli import app
+from oaraim.errors import (
     AIRBORNE_MODELS,
     gnss_variances,
     sigma_user_airborne_m,
     sigma_user_ed259a_m,
     sop_variances,
 )
-from oaraim.cli import app
 from oaraim.execute import RunOptions, run_study
 from oaraim.geometry.sky import line_of_sight, look_angles
 from oaraim.readers import GALILEO

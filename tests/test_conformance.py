@@ -23,9 +23,9 @@ from oaraim import araim
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.araim import availability as av
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import CONVENTIONS, FaultModeRule, fault_mode_rule, fault_modes
 from oaraim.araim.mhss import required_order
+from oaraim.errors import gnss_variances, sop_variances
 
 #: WG-C ARAIM TSG, Reference Airborne Algorithm Description Document v3.0 (2019), Appendix D
 #: (numerical example, also EU-US Cooperation on Satellite Navigation WG-C, ARAIM Technical

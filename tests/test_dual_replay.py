@@ -5,7 +5,7 @@ the ISM per constellation, the summary numbers pinned."""
 import numpy as np
 import pytest
 
-from oaraim import araim
+from oaraim import araim, errors
 from oaraim.geometry import dual_frequency as dfq
 from oaraim.registry import STUDIES
 from oaraim.studies.common import dual_replay
@@ -20,7 +20,7 @@ def test_iono_free_factors_and_parse_ism():
     """The factors of the pairs (2.98 L1/L2, 2.59 L1/L5 and E1/E5a), equal to the ADD's."""
     assert dfq.factor(dfq.F_L1_HZ, dfq.F_L2_HZ) == pytest.approx(2.978, abs=1e-3)
     assert dfq.factor(dfq.F_L1_HZ, dfq.F_L5_HZ) == pytest.approx(
-        float(araim.error_models.iono_free_factor()), rel=1e-12)
+        float(errors.iono_free_factor()), rel=1e-12)
     assert dual_replay.parse_ism("g", dual_replay.ISM_GALILEO_TEXT) == araim.ISM_GALILEO
     with pytest.raises(ValueError, match="g must be SIGMA_URA_M,B_NOM_M,P_SAT,P_CONST"):
         dual_replay.parse_ism("g", "1,2")
@@ -123,10 +123,10 @@ def test_airborne_models_scale_with_the_pair():
     f15 = dfq.factor(dfq.F_L1_HZ, dfq.F_L5_HZ)
     f12 = dfq.factor(dfq.F_L1_HZ, dfq.F_L2_HZ)
     add15 = dual_replay.user_sigma_m(el, np.full(3, f15))
-    np.testing.assert_allclose(add15, araim.error_models.sigma_user_airborne_m(el), rtol=1e-12)
+    np.testing.assert_allclose(add15, errors.sigma_user_airborne_m(el), rtol=1e-12)
     np.testing.assert_allclose(dual_replay.user_sigma_m(el, np.full(3, f12)), add15 * f12 / f15)
     ed = dual_replay.user_sigma_m(el, np.full(3, f15), "ed259a")
-    np.testing.assert_allclose(ed, araim.error_models.sigma_user_ed259a_m(el), rtol=1e-12)
+    np.testing.assert_allclose(ed, errors.sigma_user_ed259a_m(el), rtol=1e-12)
     np.testing.assert_allclose(dual_replay.user_sigma_m(el, np.full(3, f12), "ed259a"),
                                ed * f12 / f15)
 

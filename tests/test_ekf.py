@@ -11,7 +11,7 @@ from oaraim import sim
 from oaraim.araim import ekf, ekf_raim
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
-from oaraim.geometry import imu
+from oaraim.errors import imu
 
 # ----------------------------------------------------------------------------------------
 # A plain linear Kalman filter in NumPy (the reference)

@@ -17,7 +17,7 @@ import pytest
 
 from oaraim import araim, geometry
 from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sigma_user_ed259a_m
+from oaraim.errors import gnss_variances, sigma_user_ed259a_m
 from oaraim.readers import gpstime
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,5 @@
-"""Tests of araim.error_models: the nominal error models of seed 004 Appendix A (ADD terms).
+"""Tests of oaraim.errors (gnss, sop): the nominal error models of seed 004 Appendix A (ADD
+terms), and the earlier homes that re-export them (araim.error_models, geometry, sim).
 
 Hand-derived values:
 - troposphere (MOPS / ADD): 0.12 m * 1.001 / sqrt(0.002001 + sin^2 el); at the zenith
@@ -18,7 +19,7 @@ import math
 import numpy as np
 import pytest
 
-from oaraim.araim import error_models as em
+from oaraim import errors as em
 
 F0 = 10.23e6
 ELS_DEG = np.array([5.0, 10.0, 15.0, 30.0, 45.0, 60.0, 90.0])
@@ -102,3 +103,23 @@ def test_models_are_replaceable():
         el, 1.0, tropo_model=lambda e: 0.0 * e, user_model=lambda e: 0.0 * e + 0.5))
     np.testing.assert_allclose(vi, 1.25, rtol=1e-15)
     np.testing.assert_allclose(va, 4 / 9 + 0.25, rtol=1e-15)
+
+
+def test_the_earlier_homes_re_export_the_one_home():
+    """``araim.error_models`` (the README's ``araim.error_models.gnss_variances(el)``), the
+    geometry face's atmosphere and IMU names and the sim face's world models are the objects of
+    ``oaraim.errors``, not copies: one definition, whichever name a user wrote."""
+    from oaraim import araim, geometry, sim
+    from oaraim.araim import error_models
+
+    assert araim.error_models is error_models
+    assert error_models.__all__
+    for name in error_models.__all__:
+        assert getattr(error_models, name) is getattr(em, name), name
+    assert geometry.atmosphere is em.atmosphere and geometry.imu is em.imu
+    assert geometry.ImuSpec is em.ImuSpec and geometry.vn100 is em.vn100
+    assert sim.ErrorModel is em.ErrorModel and sim.GnssErrorModel is em.GnssErrorModel
+    assert geometry.SISError is em.SISError and geometry.sis_error.summary is em.sis.summary
+    el = np.deg2rad(ELS_DEG)
+    np.testing.assert_array_equal(araim.error_models.gnss_variances(el)[0],
+                                  em.gnss_variances(el)[0])

@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 from oaraim import araim
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.fault_modes import fault_modes as _fault_modes_eager
+from oaraim.errors import gnss_variances, sop_variances
 from tests.test_mhss import random_cases
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped

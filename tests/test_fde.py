@@ -19,7 +19,7 @@ import pytest
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.errors import gnss_variances, sop_variances
 from tests.test_mhss import random_cases
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped

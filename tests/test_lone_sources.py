@@ -22,8 +22,8 @@ import pytest
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.araim.integrity_risk import monitor_maps
+from oaraim.errors import gnss_variances, sop_variances
 from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am
 from tests.test_theorems import SOP, theorem_cases

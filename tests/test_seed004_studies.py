@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from oaraim import araim, geometry, mc
+from oaraim import araim, errors, geometry, mc
 from oaraim.registry import STUDIES
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.seed004 import Fig4Cell
@@ -75,11 +75,11 @@ def test_fig4_cell_matches_public_protection_levels(cell):
                       params["h_max_m"]) for k in keys[:n]]
     az_s = np.stack([np.asarray(x.az_rad) for x in tw])
     el_s = np.stack([np.asarray(x.el_rad) for x in tw])
-    vi, va = (np.asarray(x) for x in araim.error_models.gnss_variances(el, 1.0))
+    vi, va = (np.asarray(x) for x in errors.gnss_variances(el, 1.0))
     gps = protection_levels(geometry.geometry_rows(az, el), np.zeros(az.shape, int), vi,
                                   va, 0.75, 1e-5, [1e-8], araim.BUDGET_SEED004_TABLE_I,
                                   valid=valid)
-    si, sa = araim.error_models.sop_variances(np.full(az_s.shape, 3.0))
+    si, sa = errors.sop_variances(np.full(az_s.shape, 3.0))
     both = protection_levels(
         geometry.geometry_rows(np.concatenate([az, az_s], -1), np.concatenate([el, el_s], -1)),
         np.concatenate([np.zeros(az.shape, int), np.ones(az_s.shape, int)], -1),

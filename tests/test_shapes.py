@@ -67,7 +67,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from oaraim import araim, geometry, sim
+from oaraim import araim, errors, geometry, sim
 from oaraim.araim import Sources
 from oaraim.bench import mhss_bench_inputs
 
@@ -92,7 +92,7 @@ key = jax.random.key(0)
 t_gps = 1.3e9 + np.arange(2) * 600.0
 usable = rng.random((2, 5)) > 0.2
 
-spec = geometry.vn100()
+spec = errors.vn100()
 params = araim.ekf.params_from_imu(spec, 0.01, 9.8)
 state = araim.ekf_init([0, 0, 0, 1.0], np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
                        np.zeros(2), np.eye(17))

@@ -6,9 +6,8 @@ import gzip
 import numpy as np
 import pytest
 
-from oaraim import geometry
+from oaraim import errors, geometry
 from oaraim.constants import C_M_S, OMEGA_E_GNSS_RAD_S
-from oaraim.geometry import sis_error
 from oaraim.readers import ClockFileError, galileo_nav, gpstime, read_clock_rinex
 
 NAV = "obs3/BRDC00IGS_R_20230010000_01D_MN.rnx.gz"
@@ -64,12 +63,12 @@ def test_rac_frame_and_sisre_by_hand():
     c dt = 0.5 m; G02 7 m along-track (-x at (0, a, 0)), clock 0. Clock datum 0.25 m, mean R 0.5 m:
     SISRE(G01) = |0.98 * 0.5 - 0.25| = 0.24; SISRE(G02) = sqrt(0.24^2 + 49/49)."""
     a, v = 26.56e6, 3874.0
-    e_r, e_a, e_c = sis_error.rac_unit_vectors([a, 0, 0], [0, v - OMEGA_E_GNSS_RAD_S * a, 0])
+    e_r, e_a, e_c = errors.sis.rac_unit_vectors([a, 0, 0], [0, v - OMEGA_E_GNSS_RAD_S * a, 0])
     np.testing.assert_allclose(np.stack([e_r, e_a, e_c]), np.eye(3), atol=1e-15)
     prec = np.array([[[a, 0, 0], [0, a, 0]]])
     vel = np.array([[[0, v, 0], [-v, 0, 0]]])
     brd = prec + np.array([[[1.0, 0, 0], [-7.0, 0, 0]]])
-    e = sis_error.sis_errors(["G01", "G02"], brd, vel, np.array([[0.5 / C_M_S, 0.0]]), prec,
+    e = errors.sis_errors(["G01", "G02"], brd, vel, np.array([[0.5 / C_M_S, 0.0]]), prec,
                              np.zeros((1, 2)), np.ones((1, 2), bool))
     # the frame is the broadcast position's: G02's, 7 m off, tilts it by 7 m / a (2e-6 m here)
     np.testing.assert_allclose(e.radial_m, [[1, 0]], atol=1e-5)
@@ -170,7 +169,7 @@ def test_broadcast_vs_precise_sisre_gps_and_galileo(day):
     sp, ck, fnav, _ = day
     err = geometry.compare_broadcast_precise(fnav, sp, ck)
     for sysch, n_sats in (("G", 31), ("E", 24)):  # E14, E18 unhealthy all day
-        s = sis_error.summary(err, sysch)
+        s = errors.sis.summary(err, sysch)
         assert s["n"] >= 0.99 * n_sats * sp.t_gps_s.size
         assert s["sisre_m"][1] <= PUBLISHED_95_M[sysch]
         for name, bounds in MEASURED_BOUNDS_M[sysch].items():
@@ -183,8 +182,8 @@ def test_fnav_clock_matches_e1e5a_precise_clocks_better_than_inav(day):
     """MGEX precise Galileo clocks refer to E1/E5a, like F/NAV clocks; I/NAV clocks refer to
     E1/E5b. Measured |clock| 95 %: F/NAV 0.28 m, I/NAV 0.42 m."""
     sp, ck, fnav, inav = day
-    f = sis_error.summary(geometry.compare_broadcast_precise(fnav, sp, ck, systems="E"), "E")
-    i = sis_error.summary(geometry.compare_broadcast_precise(inav, sp, ck, systems="E"), "E")
+    f = errors.sis.summary(geometry.compare_broadcast_precise(fnav, sp, ck, systems="E"), "E")
+    i = errors.sis.summary(geometry.compare_broadcast_precise(inav, sp, ck, systems="E"), "E")
     assert f["clock_m"][1] < 0.8 * i["clock_m"][1]
 
 
@@ -215,12 +214,12 @@ def test_beidou_broadcast_vs_precise(shared_data):
     assert not {int(p[1:]) for p in bds.prns} & beidou_nav.GEO_PRNS
     w = {p: SISRE_WEIGHTS["C_IGSO"] for p in bds.prns if int(p[1:]) in beidou_nav.IGSO_PRNS}
     bds3 = [p for p in bds.prns if int(p[1:]) >= 19]
-    s3 = sis_error.summary(geometry.compare_broadcast_precise(bds, sp, ck, systems="C",
+    s3 = errors.sis.summary(geometry.compare_broadcast_precise(bds, sp, ck, systems="C",
                                                               weights=w, prns=bds3), "C")
     assert s3["n"] >= 0.99 * 25 * sp.t_gps_s.size
     assert np.all(np.array(s3["sisre_m"]) <= (0.6, 1.5, 3.0))
     assert np.all(np.array(s3["orbit_3d_m"]) <= (1.6, 2.2, 4.0))
     b3i = beidou_nav.load_beidou(shared_data / NAV, clock="B3I")
-    s3i = sis_error.summary(geometry.compare_broadcast_precise(b3i, sp, ck, systems="C",
+    s3i = errors.sis.summary(geometry.compare_broadcast_precise(b3i, sp, ck, systems="C",
                                                                prns=bds3), "C")
     assert s3i["clock_m"][1] > 10.0 > 5 * s3["clock_m"][1]

@@ -1,4 +1,4 @@
-"""Snapshot replay (araim.snapshot) and the atmospheric models (geometry.atmosphere), on
+"""Snapshot replay (araim.snapshot) and the atmospheric models (errors.atmosphere), on
 synthetic data: no shared files needed."""
 
 import math
@@ -9,7 +9,7 @@ import pytest
 from oaraim import araim, geometry
 from oaraim.araim import snapshot
 from oaraim.constants import C_M_S
-from oaraim.geometry import atmosphere
+from oaraim.errors import atmosphere
 
 # --------------------------------------------------------------------------- Klobuchar
 

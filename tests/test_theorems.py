@@ -26,7 +26,7 @@ from scipy import special
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
-from oaraim.araim.error_models import gnss_variances, sop_variances
+from oaraim.errors import gnss_variances, sop_variances
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py

@@ -1,4 +1,4 @@
-"""Scenario synthesis: trajectories, IMU error model, clocks (sim.trajectory, geometry.imu)."""
+"""Scenario synthesis: trajectories, IMU error model, clocks (sim.trajectory, errors.imu)."""
 
 import jax
 import jax.numpy as jnp
@@ -9,7 +9,8 @@ from scipy.linalg import expm
 from oaraim import geometry
 from oaraim.araim import ekf
 from oaraim.constants import C_M_S
-from oaraim.geometry import clocks, imu
+from oaraim.errors import imu
+from oaraim.geometry import clocks
 from oaraim.sim import measurement, trajectory
 
 

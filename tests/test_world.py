@@ -257,9 +257,9 @@ def test_gnss_errors_variance_adds_up():
     """``sim.gnss_errors`` at one elevation (30 deg) over 4,000 satellites (stationary start):
     the variance is the sum of its terms, (2/3 URA)^2 + b_nom^2 / 3 (uniform) + sigma_tropo^2 +
     sigma_iono^2 + (scale x iono-free x sigma_MP)^2 + (iono-free x sigma_noise)^2, by the ADD
-    formulas of araim.error_models. Relative sd of the sample variance sqrt(2 / 4000) = 2.2 %
+    formulas of errors. Relative sd of the sample variance sqrt(2 / 4000) = 2.2 %
     (the uniform term changes it little): 10 % is > 4 sd."""
-    from oaraim.araim import error_models as em
+    from oaraim import errors as em
     gm = sim.GnssErrorModel(sigma_iono_m=0.4)
     el = jnp.full((3, 4000), np.deg2rad(30.0))
     e = np.asarray(sim.gnss_errors(jax.random.key(4), jnp.array([0.0, 1.0, 2.0]), el, 1.0, gm))

@@ -27,7 +27,7 @@ def export(lats):
     import jax.numpy as jnp
 
     from oaraim import geometry
-    from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances
+    from oaraim.errors import AIRBORNE_MODELS, gnss_variances
     from oaraim.geometry.sky import look_angles
     from oaraim.readers import GPS
     from oaraim.studies import availability_map as am

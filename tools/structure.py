@@ -83,20 +83,21 @@ LAYERS = {
     "config": set(),                            # oaraim.config: settings read by several layers
     "batching": {"config"},                     # oaraim.batching: tiles, buckets, threads, stores
     "oracles": set(),                           # oaraim.reference*: NumPy/SciPy only
+    "errors": {"constants"},                    # oaraim.errors: the error models, one home
     "readers": {"constants"},                   # the files: records and tables as arrays
-    "geometry": {"readers", "constants", "batching"},
-    "araim": {"geometry", "readers", "constants", "config", "batching"},
+    "geometry": {"readers", "errors", "constants", "batching"},
+    "araim": {"geometry", "readers", "errors", "constants", "config", "batching"},
     "mc": {"config"},
-    "sim": {"araim", "geometry", "readers", "constants", "mc", "batching"},  # mc: key streams
+    "sim": {"araim", "geometry", "readers", "errors", "constants", "mc", "batching"},  # mc: streams
     "data": {"readers"},                        # oaraim.data: the real files, checked
-    "studies": {"araim", "geometry", "readers", "mc", "sim", "data", "constants", "config",
-                "batching"},
-    "app": {"studies", "araim", "geometry", "readers", "mc", "sim", "data", "constants",
-            "config", "oracles", "batching"},   # cli, execute, registry, report, bench
+    "studies": {"araim", "geometry", "readers", "errors", "mc", "sim", "data", "constants",
+                "config", "batching"},
+    "app": {"studies", "araim", "geometry", "readers", "errors", "mc", "sim", "data",
+            "constants", "config", "oracles", "batching"},  # cli, execute, registry, report
 }
 _SUBPACKAGE_LAYERS = ("readers", "geometry", "araim", "mc", "sim", "studies")
 #: the layers whose package ``__init__`` is the only way in for every other layer
-FACED = ("araim", "geometry", "readers", "sim", "mc")
+FACED = ("araim", "geometry", "readers", "errors", "sim", "mc")
 
 
 def layer_of(module: str) -> str:
@@ -106,7 +107,7 @@ def layer_of(module: str) -> str:
         return "root"
     if parts[1] in _SUBPACKAGE_LAYERS:
         return parts[1]
-    if parts[1] in ("constants", "config", "data", "batching"):
+    if parts[1] in ("constants", "config", "data", "batching", "errors"):
         return parts[1]
     if parts[1].startswith("reference"):
         return "oracles"

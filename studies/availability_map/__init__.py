@@ -44,8 +44,8 @@ from oaraim.araim import (
     required_order,
 )
 from oaraim.araim import availability as av
-from oaraim.araim.error_models import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.batching import jit_kernel, map_tiles, materialize
+from oaraim.errors import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.geometry import GALILEO, GPS, azimuth, elevation, line_of_sight
 from oaraim.mc import Values
 from oaraim.studies.availability_map import leo as leo_option

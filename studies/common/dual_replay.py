@@ -15,14 +15,14 @@ an ``araim.Ism`` each (defaults ``araim.ISM_GPS``, ``araim.ISM_GALILEO``).
 
 import numpy as np
 
-from oaraim import araim, geometry
-from oaraim.araim.error_models import (
+from oaraim import araim, errors, geometry
+from oaraim.constants import C_M_S
+from oaraim.errors import (
     sigma_multipath_m,
     sigma_noise_m,
     sigma_tropo_m,
     sigma_user_ed259a_m,
 )
-from oaraim.constants import C_M_S
 from oaraim.geometry import dual_frequency as dfq
 from oaraim.geometry import pseudorange_model as prm
 from oaraim.readers import navigation_extras, rinex_obs
@@ -136,7 +136,7 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
     used_isms = [isms[k] for k in present]
     ura = np.array([i.sigma_ura_m for i in used_isms])[ism_of]
     ure = np.array([(i.sigma_ure_m if i.sigma_ure_m is not None
-                     else araim.error_models.URE_OVER_URA * i.sigma_ura_m)
+                     else errors.URE_OVER_URA * i.sigma_ura_m)
                     for i in used_isms])[ism_of]
     clock_m = C_M_S * (sat.clock_s - sat.tgd_s)
     rot, _ = prm.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)

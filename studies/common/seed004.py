@@ -47,8 +47,8 @@ from oaraim.araim import (
     protection_levels_priors_kernel,
     required_order,
 )
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import jit_kernel
+from oaraim.errors import gnss_variances, sop_variances
 from oaraim.readers import gpstime
 from oaraim.studies.base import (
     Param,

@@ -9,8 +9,8 @@ import xarray as xr
 
 from oaraim import araim, mc, sim
 from oaraim.araim import BUDGET_SEED004_TABLE_I, required_order, snapshot, solution_separation
-from oaraim.araim.error_models import gnss_variances, sop_variances
 from oaraim.batching import TILE
+from oaraim.errors import gnss_variances, sop_variances
 from oaraim.geometry import epoch_geometry
 from oaraim.readers import gpstime, load_recording
 from oaraim.studies.base import (
