@@ -13,7 +13,7 @@ import time
 import jax
 import numpy as np
 
-from oaraim import araim, sim
+from oaraim import araim, errors, sim
 
 
 def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:
@@ -22,7 +22,7 @@ def bench_ekf_drive(runs: int = 1000, seed: int = 0, repeats: int = 1) -> dict:
     setup = sim.drive_setup(scenario)
     keys = jax.random.split(jax.random.key(seed), runs)
     # the default (realistic) error world with the scenario's fault (docs/error-world.md)
-    err = sim.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
+    err = errors.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
                          fault_bias_m=scenario.fault_bias_m)
     fn = jax.jit(lambda k: sim.monte_carlo_drive(k, setup, err=err))
     t0, c0 = time.perf_counter(), time.process_time()
@@ -59,7 +59,7 @@ def bench_filter_bank(runs: int = 1000, seed: int = 0, batch: int = 100) -> dict
     runs; returns a JSON-able dict with the cost ratio."""
     scenario = sim.drive_seed000()
     setup = sim.drive_setup(scenario)
-    err = sim.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
+    err = errors.ErrorModel(fault_tower=scenario.fault_tower, fault_onset_s=scenario.fault_onset_s,
                          fault_bias_m=scenario.fault_bias_m)
     keys = jax.random.split(jax.random.key(seed), runs)
     bank = jax.jit(jax.vmap(lambda k: sim.simulate_filter_drive(k, setup, err, sim.no_fault())))

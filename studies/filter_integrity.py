@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, mc, sim
+from oaraim import araim, errors, mc, sim
 from oaraim.studies.base import (
     Param,
     Study,
@@ -152,10 +152,10 @@ class FilterIntegrity(Study):
                                 duration_s=p["duration_s"] if p["duration_s"] > 0 else None)
         t_end = float(setup.t_s[-1])
         if p["world"] == "clean":
-            err = sim.ErrorModel.clean(sigma_pr_m=p["sigma_pr_m"], fault_onset_s=np.inf,
+            err = errors.ErrorModel.clean(sigma_pr_m=p["sigma_pr_m"], fault_onset_s=np.inf,
                                        fault_bias_m=0.0)
         else:
-            err = sim.ErrorModel(sigma_pr_m=p["sigma_pr_m"], nlos_rate_per_s=0.0,
+            err = errors.ErrorModel(sigma_pr_m=p["sigma_pr_m"], nlos_rate_per_s=0.0,
                                  fault_onset_s=np.inf, fault_bias_m=0.0)
         sigma_f = p["sigma_scale"] * p["sigma_pr_m"] if (
             p["world"] == "clean" or p["sigma_scale"] != 1.0) else 0.0

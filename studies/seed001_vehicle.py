@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry, mc, sim
+from oaraim import errors, geometry, mc, sim
 from oaraim.araim import snapshot
 from oaraim.errors import gnss_variances
 from oaraim.geometry import epoch_geometry
@@ -72,7 +72,7 @@ def world_noise_fn(geom, params, seed):
     t = jnp.asarray(geom.t_s)
     el = jnp.asarray(geom.el_rad)
     is_gps = np.asarray(geom.is_gps)
-    err = sim.ErrorModel(sigma_pr_m=params["sigma_lte_noise_m"], fault_onset_s=np.inf,
+    err = errors.ErrorModel(sigma_pr_m=params["sigma_lte_noise_m"], fault_onset_s=np.inf,
                          fault_bias_m=0.0)
     t_cal = -jnp.arange(300)[::-1] * 1.0
 

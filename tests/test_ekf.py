@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 from scipy.linalg import expm
 
-from oaraim import sim
+from oaraim import errors, sim
 from oaraim.araim import ekf, ekf_raim
 from oaraim.araim.chi2 import detection_threshold, noncentrality
 from oaraim.araim.status import Status
@@ -277,7 +277,7 @@ def drive():
     # the clean world (white 2 m noise, the filter told the truth's sigma): the consistency
     # checks below hold only there; the realistic world is tests/test_world.py's
     run = jax.jit(jax.vmap(lambda k, b, off: sim.simulate_drive(
-        k, setup, sim.ErrorModel.clean(fault_bias_m=b, fault_onset_s=25.0), dof_offset=off,
+        k, setup, errors.ErrorModel.clean(fault_bias_m=b, fault_onset_s=25.0), dof_offset=off,
         traces=True),
         in_axes=(0, None, None)))
     return setup, keys, run

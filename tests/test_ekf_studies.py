@@ -9,7 +9,7 @@ import jax
 import numpy as np
 import pytest
 
-from oaraim import geometry, mc, sim
+from oaraim import errors, geometry, mc, sim
 from oaraim.araim import ekf_replay
 from oaraim.execute import run_study
 from oaraim.registry import STUDIES
@@ -35,13 +35,13 @@ def drive(tmp_path_factory):
     """Run 0 of seed 0 in the clean world (white 2 m noise, the filter told the truth: the exact
     detection / exclusion expectations below hold only there): synthesized, written (Parquet),
     loaded, replayed; and the direct run."""
-    return _drive(tmp_path_factory, sim.ErrorModel.clean())
+    return _drive(tmp_path_factory, errors.ErrorModel.clean())
 
 
 @pytest.fixture(scope="module")
 def world_drive(tmp_path_factory):
     """The same run in the default (realistic) error world."""
-    return _drive(tmp_path_factory, sim.ErrorModel())
+    return _drive(tmp_path_factory, errors.ErrorModel())
 
 
 @pytest.mark.parametrize("which", ["drive", "world_drive"])
@@ -141,7 +141,7 @@ def test_study_defaults_are_the_realistic_world_and_the_scenario_fault():
         study = STUDIES[name]
         p = study.validate({})
         assert p["world"] == "realistic" and p["filter_sigma_pr_m"] == 0.0
-        want = sim.ErrorModel(fault_tower=sc.fault_tower, fault_onset_s=sc.fault_onset_s,
+        want = errors.ErrorModel(fault_tower=sc.fault_tower, fault_onset_s=sc.fault_onset_s,
                               fault_bias_m=sc.fault_bias_m)._replace(
             **study.calibrated, **{k: v for k, (v, _) in study.chosen.items()})
         assert world_of(p) == want
@@ -206,7 +206,7 @@ def test_seed002_defaults_are_its_calibrated_fit():
     p = study.validate({})
     assert study.calibrated == {"fault_bias_m": 30.3, "mp_sigma_m": 2.07}
     assert p["fault_bias_m"] == 30.3 and p["mp_sigma_m"] == 2.07
-    assert p["nlos_rate_per_s"] == sim.ErrorModel().nlos_rate_per_s
+    assert p["nlos_rate_per_s"] == errors.ErrorModel().nlos_rate_per_s
     cal = study.calibration
     assert [f.name for f in cal.free] == list(study.calibrated)
     assert all(f.low < p[f.name] < f.high for f in cal.free)

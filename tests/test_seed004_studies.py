@@ -314,7 +314,7 @@ def test_uav_realistic_world_wiring(shared_data):
     tw = ~geom.is_gps
     operator = jnp.asarray([0] * 5 + [1] * 3 + [2] * 3)
     t = jnp.asarray(geom.t_s)
-    world = sim.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0, nlos_rate_per_s=0.0,
+    world = errors.ErrorModel(fault_onset_s=np.inf, fault_bias_m=0.0, nlos_rate_per_s=0.0,
                            calib_window_s=float(u.GNSS_PERIOD_EPOCHS))
     # the aircraft sees the towers in line of sight and fits their clocks over the whole
     # pre-flight GNSS period
@@ -325,7 +325,7 @@ def test_uav_realistic_world_wiring(shared_data):
     np.testing.assert_allclose(e_world[:, tw], np.asarray(sop), rtol=1e-12)
     assert sig == float(sig_ref)
     gps = np.asarray(sim.gnss_errors(key, t, jnp.asarray(geom.el_rad), 1.0,
-                                     sim.GnssErrorModel()))
+                                     errors.GnssErrorModel()))
     v = geom.valid & geom.is_gps
     np.testing.assert_allclose(e_world[v], gps[v], rtol=1e-12)
     clean = u.synthesize(st.validate({"n_epochs": "40", "world": "clean"}), 0)[1]

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from oaraim import mc, sim
+from oaraim import errors, mc, sim
 from oaraim.geometry import clocks
 from oaraim.sim import measurement as m
 
@@ -45,7 +45,7 @@ def test_gauss_markov_stationary_variance_and_autocorrelation():
 
 def test_nlos_probabilities_by_hand():
     """rate 0.1 /s, duration 5 s, dt 1 s: p_on = 1 - e^-0.1, p_off = 1 - e^-0.2."""
-    err = sim.ErrorModel(nlos_rate_per_s=0.1, nlos_duration_s=5.0)
+    err = errors.ErrorModel(nlos_rate_per_s=0.1, nlos_duration_s=5.0)
     p_on, p_off = m.nlos_probabilities(err, 1.0)
     assert float(p_on) == pytest.approx(1 - np.exp(-0.1), rel=1e-14)
     assert float(p_off) == pytest.approx(1 - np.exp(-0.2), rel=1e-14)
@@ -54,7 +54,7 @@ def test_nlos_probabilities_by_hand():
 def test_nlos_step_transitions():
     """Uniforms decide: an episode ends when u0 < p_off, a clear tower starts one when
     u1 < p_on, with bias nlos_bias_m times the exponential draw."""
-    err = sim.ErrorModel(nlos_rate_per_s=0.1, nlos_duration_s=5.0, nlos_bias_m=10.0)
+    err = errors.ErrorModel(nlos_rate_per_s=0.1, nlos_duration_s=5.0, nlos_bias_m=10.0)
     state = jnp.array([7.0, 7.0, 0.0, 0.0])
     u = jnp.array([[0.01, 0.99, 0.5, 0.5], [0.5, 0.5, 0.01, 0.99]])
     out = m.nlos_step(state, u, jnp.full(4, 0.3), err, 1.0)
@@ -66,7 +66,7 @@ def test_nlos_share_and_episode_length():
     p_on / (p_on + p_off) = 0.0909 and the mean excess delay of the episodes the bias mean.
     The share's sd over 8e6 correlated samples (episodes of ~50 steps: ~1.6e5 independent) is
     about sqrt(0.09 * 0.91 / 1.6e5) = 7e-4: 0.006 is ~8 sd."""
-    err = sim.ErrorModel(nlos_rate_per_s=0.02, nlos_duration_s=5.0, nlos_bias_m=10.0)
+    err = errors.ErrorModel(nlos_rate_per_s=0.02, nlos_duration_s=5.0, nlos_bias_m=10.0)
     n, dt = 4000, 0.1
     p_on, p_off = (float(v) for v in m.nlos_probabilities(err, dt))
     share = p_on / (p_on + p_off)
@@ -83,13 +83,13 @@ def test_nlos_share_and_episode_length():
 
 
 def test_common_clock_step_is_the_receiver_clock_model_and_zero_psd_is_safe():
-    err = sim.ErrorModel()
+    err = errors.ErrorModel()
     x = jnp.array([[1.0, 0.1], [2.0, -0.2]])
     w = jnp.array([[0.3, -1.2], [0.5, 0.7]])
     got = m.common_clock_step(x, w, err, 0.1)
     want = clocks.clock_step_normals(w, x, 0.1, err.clk_s_wdt_s, err.clk_s_wdtdot_per_s)
     np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12)
-    still = m.common_clock_step(x, w, sim.ErrorModel.clean(), 0.1)
+    still = m.common_clock_step(x, w, errors.ErrorModel.clean(), 0.1)
     np.testing.assert_allclose(np.asarray(still), [[1.01, 0.1], [1.98, -0.2]], rtol=1e-14)
 
 
@@ -134,10 +134,10 @@ def _calib(err, n=64, seed=0):
 
 
 def test_clean_world_has_no_calibration_and_the_filter_is_told_the_truth():
-    d = _calib(sim.ErrorModel.clean(sigma_pr_m=2.0), n=4)
+    d = _calib(errors.ErrorModel.clean(sigma_pr_m=2.0), n=4)
     assert np.all(np.asarray(d.world.clk_fit_m) == 0.0)
     assert np.all(np.isnan(np.asarray(d.sigma_empirical_m)))
-    sig = jax.vmap(lambda dd: sim.drive.filter_sigma(dd, sim.ErrorModel.clean(2.0)))(d)
+    sig = jax.vmap(lambda dd: sim.drive.filter_sigma(dd, errors.ErrorModel.clean(2.0)))(d)
     np.testing.assert_array_equal(np.asarray(sig), 2.0)
 
 
@@ -147,12 +147,12 @@ def test_empirical_sigma_is_estimated_not_copied():
     run's estimate differs from the truth (it is estimated), and their mean over 64 runs lies
     within 1.5 % (4 sd of the mean) of 1.7 m. With the default multipath and NLOS added, the
     estimate grows."""
-    white = sim.ErrorModel(sigma_pr_m=1.7, mp_sigma_m=0.0, nlos_rate_per_s=0.0,
+    white = errors.ErrorModel(sigma_pr_m=1.7, mp_sigma_m=0.0, nlos_rate_per_s=0.0,
                            clk_eps_sigma_m=0.0, clk_s_wdt_s=0.0, clk_s_wdtdot_per_s=0.0)
     s = np.asarray(_calib(white).sigma_empirical_m)
     assert np.all(s != 1.7) and np.std(s) == pytest.approx(1.7 * 0.029, rel=0.3)
     assert np.mean(s) == pytest.approx(1.7, rel=0.015)
-    s_world = np.asarray(_calib(sim.ErrorModel(sigma_pr_m=1.7)).sigma_empirical_m)
+    s_world = np.asarray(_calib(errors.ErrorModel(sigma_pr_m=1.7)).sigma_empirical_m)
     assert np.median(s_world) > 1.7 * 1.1
 
 
@@ -162,7 +162,7 @@ def test_fit_residual_grows_after_the_gnss_period():
     the fit error at t is e_a + e_b (t - tbar): its sd at t = 0 and t = 300 s follows the LS
     variances sigma^2 (1/N + (t - tbar)^2 / Sxx) (hand formula, 64 runs x 5 towers:
     relative sd of the variance sqrt(2 / 320) = 8 %, 30 % tolerance)."""
-    white = sim.ErrorModel(sigma_pr_m=2.0, mp_sigma_m=0.0, nlos_rate_per_s=0.0,
+    white = errors.ErrorModel(sigma_pr_m=2.0, mp_sigma_m=0.0, nlos_rate_per_s=0.0,
                            clk_eps_sigma_m=0.0, clk_s_wdt_s=0.0, clk_s_wdtdot_per_s=0.0,
                            calib_window_s=120.0)
     fit = np.asarray(_calib(white).world.clk_fit_m).reshape(-1, 2)
@@ -175,8 +175,8 @@ def test_fit_residual_grows_after_the_gnss_period():
 
 
 def test_sop_errors_are_reproducible_from_the_key():
-    d1 = _calib(sim.ErrorModel(), n=2, seed=5)
-    d2 = _calib(sim.ErrorModel(), n=2, seed=5)
+    d1 = _calib(errors.ErrorModel(), n=2, seed=5)
+    d2 = _calib(errors.ErrorModel(), n=2, seed=5)
     np.testing.assert_array_equal(np.asarray(d1.world.clk_fit_m), np.asarray(d2.world.clk_fit_m))
     np.testing.assert_array_equal(np.asarray(d1.sigma_empirical_m),
                                   np.asarray(d2.sigma_empirical_m))
@@ -223,9 +223,9 @@ def mi_runs():
     keys = jax.random.split(jax.random.key(25), 16)
     run = jax.jit(jax.vmap(lambda k, e: sim.simulate_drive(k, setup, e), in_axes=(0, None)))
     no_fault = dict(fault_onset_s=np.inf, fault_bias_m=0.0)
-    worlds = {"clean": sim.ErrorModel.clean(**no_fault),
-              "unmodelled": sim.ErrorModel.clean(mp_sigma_m=8.0, mp_tau_s=30.0, **no_fault),
-              "realistic": sim.ErrorModel(**no_fault)}
+    worlds = {"clean": errors.ErrorModel.clean(**no_fault),
+              "unmodelled": errors.ErrorModel.clean(mp_sigma_m=8.0, mp_tau_s=30.0, **no_fault),
+              "realistic": errors.ErrorModel(**no_fault)}
     return {k: jax.device_get(run(keys, w)) for k, w in worlds.items()}
 
 
@@ -260,7 +260,7 @@ def test_gnss_errors_variance_adds_up():
     formulas of errors. Relative sd of the sample variance sqrt(2 / 4000) = 2.2 %
     (the uniform term changes it little): 10 % is > 4 sd."""
     from oaraim import errors as em
-    gm = sim.GnssErrorModel(sigma_iono_m=0.4)
+    gm = errors.GnssErrorModel(sigma_iono_m=0.4)
     el = jnp.full((3, 4000), np.deg2rad(30.0))
     e = np.asarray(sim.gnss_errors(jax.random.key(4), jnp.array([0.0, 1.0, 2.0]), el, 1.0, gm))
     iff = em.iono_free_factor()

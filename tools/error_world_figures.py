@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 
-from oaraim import sim
+from oaraim import errors, sim
 from oaraim.sim import measurement as m
 
 matplotlib.use("Agg")
@@ -86,7 +86,7 @@ def main(out_dir="docs/img"):
     """Write the three PNGs into ``out_dir``; returns their paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    err = sim.ErrorModel()
+    err = errors.ErrorModel()
     paths = []
     for name, fn, size in (("multipath-acf", multipath_acf, (5, 3)),
                            ("nlos-episodes", nlos_episodes, (8, 3.6)),

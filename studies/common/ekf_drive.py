@@ -19,7 +19,7 @@ import jax
 import numpy as np
 import xarray as xr
 
-from oaraim import mc, readers, sim
+from oaraim import errors, mc, readers, sim
 from oaraim.araim import ekf_raim, ekf_replay
 from oaraim.studies.base import (
     NO_RECORDING,
@@ -64,9 +64,9 @@ def world_of(p, mp_sigma_m=None, mp_tau_s=None):
     fault = dict(fault_tower=p["fault_tower"] - 1, fault_onset_s=p["fault_onset_s"],
                  fault_bias_m=p["fault_bias_m"])
     if p["world"] == "clean":
-        return sim.ErrorModel.clean(sigma_pr_m=p["sigma_pr_m"], mp_sigma_m=mps, mp_tau_s=mpt,
+        return errors.ErrorModel.clean(sigma_pr_m=p["sigma_pr_m"], mp_sigma_m=mps, mp_tau_s=mpt,
                                     **fault)
-    return sim.ErrorModel(
+    return errors.ErrorModel(
         sigma_pr_m=p["sigma_pr_m"], mp_sigma_m=mps, mp_tau_s=mpt,
         nlos_rate_per_s=p["nlos_rate_per_s"], nlos_duration_s=p["nlos_duration_s"],
         nlos_bias_m=p["nlos_bias_m"], clk_eps_sigma_m=p["clk_eps_sigma_m"],
@@ -108,7 +108,7 @@ class EkfDriveStudy(Study):
         # defaults = the scenario's values (sim.trajectory._scenario; tested), written
         # here so that importing the registry does not build the trajectory
         self._scenario = None
-        w = sim.ErrorModel()
+        w = errors.ErrorModel()
         self.params = {
             "world": Param("realistic", shared.parse_world, "error world: 'realistic' "
                            "(sim.ErrorModel defaults, docs/error-world.md) or 'clean' (white "

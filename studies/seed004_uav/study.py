@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import araim, mc, sim
+from oaraim import araim, errors, mc, sim
 from oaraim.araim import BUDGET_SEED004_TABLE_I, required_order, snapshot, solution_separation
 from oaraim.batching import TILE
 from oaraim.errors import gnss_variances, sop_variances
@@ -147,7 +147,7 @@ def world_errors(geom, params, seed):
     key = jax.random.fold_in(jax.random.key(int(seed)), 0)
     tw = np.flatnonzero(~geom.is_gps)
     operator = labels(geom)[0][tw] - 1  # 0 = the first operator (labels: GPS is 0)
-    world = sim.ErrorModel(sigma_pr_m=params["sigma_pr_m"], fault_onset_s=np.inf,
+    world = errors.ErrorModel(sigma_pr_m=params["sigma_pr_m"], fault_onset_s=np.inf,
                            fault_bias_m=0.0, nlos_rate_per_s=params["nlos_rate_per_s"],
                            calib_window_s=params["calib_window_s"])
     t_s = jnp.asarray(geom.t_s)
@@ -241,7 +241,7 @@ class Seed004Uav(Study):
                        "the towers, one common clock term per operator; docs/error-world.md) or "
                        "'clean' (white noise from the PL's own model: GPS N(0, C_acc), LTE "
                        "N(0, sigma_lte_noise_m^2))"),
-        "sigma_pr_m": Param(sim.ErrorModel().sigma_pr_m, positive, "LTE thermal (white) "
+        "sigma_pr_m": Param(errors.ErrorModel().sigma_pr_m, positive, "LTE thermal (white) "
                             "noise of the realistic world (sim.ErrorModel default)", "m"),
         "nlos_rate_per_s": Param(0.0, non_negative, "NLOS episode onsets per second on each "
                                  "tower in the realistic world (the world's default is 1/250 s "
