@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from oaraim import geometry
+from oaraim import geometry, readers
 from oaraim.constants import GPS_PI, MU_GPS_M3_S2, OMEGA_E_GNSS_RAD_S
 from oaraim.geometry.nominal import GPS_SPS_EPOCH_T_GPS_S
 
@@ -148,7 +148,7 @@ def _sem_text(alm):
 def test_sem_reader_matches_yuma(shared_data, tmp_path):
     """A real 31-satellite YUMA almanac (January 2020, week 38 = 2086 mod 1024) written as SEM:
     both readers give the same orbits (to the 13 printed digits: < 1 mm)."""
-    ref = geometry.gpstime.gps_seconds(2020, 1, 1)
+    ref = readers.gpstime.gps_seconds(2020, 1, 1)
     yuma = geometry.read_yuma(shared_data / "almanac" / "almyuma_01jan2020.txt",
                               week_reference_t_gps_s=ref)
     assert int(yuma.records.toa_s[0] // 604800) == 2086
@@ -173,15 +173,15 @@ def test_almanac_file_errors(tmp_path):
     p = tmp_path / "bad.txt"
     p.write_text("******** Week 703 almanac for PRN-01 ********\nID: 01\nHealth: 000\n"
                  "Eccentricity: 0.x\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"bad\.txt: line 4: cannot read "
+    with pytest.raises(readers.AlmanacFileError, match=r"bad\.txt: line 4: cannot read "
                        "'Eccentricity' value"):
         geometry.read_yuma(p)
     p.write_text("******** Week 703 almanac for PRN-01 ********\nID: 01\nHealth: 000\n")
-    with pytest.raises(geometry.AlmanacFileError, match="line 3: the almanac block starting at "
+    with pytest.raises(readers.AlmanacFileError, match="line 3: the almanac block starting at "
                        "line 1 lacks"):
         geometry.read_yuma(p)
     p.write_text("24 X.AL3\n703 344063\n\n1\n31\n")
-    with pytest.raises(geometry.AlmanacFileError, match="truncated"):
+    with pytest.raises(readers.AlmanacFileError, match="truncated"):
         geometry.read_sem(p)
 
 
@@ -208,7 +208,7 @@ def test_yuma_unphysical_values_are_parse_errors_with_the_line(shared_data, tmp_
     line = next(ln for ln in text.splitlines() if ln.startswith(field))
     value = line.partition(":")[2].strip()
     p, _ = _mutated(shared_data, tmp_path, line, line.replace(value, bad))
-    with pytest.raises(geometry.AlmanacFileError,
+    with pytest.raises(readers.AlmanacFileError,
                        match=rf"alm\.txt: line {_line_of(text, line)}: .*{why}"):
         geometry.read_yuma(p)
 
@@ -221,7 +221,7 @@ def test_yuma_duplicated_block_is_an_error_naming_both_lines(shared_data, tmp_pa
     first = "********" + blocks[1] + "********" + blocks[2]
     p = tmp_path / "alm.txt"
     p.write_text(text + first)
-    with pytest.raises(geometry.AlmanacFileError, match=r"satellite 1 appears again \(first "
+    with pytest.raises(readers.AlmanacFileError, match=r"satellite 1 appears again \(first "
                                                         r"at line 1\)"):
         geometry.read_yuma(p)
 
@@ -229,13 +229,13 @@ def test_yuma_duplicated_block_is_an_error_naming_both_lines(shared_data, tmp_pa
 def test_sem_wrong_file_and_bad_values_name_the_line(tmp_path):
     p = tmp_path / "x.al3"
     p.write_text("not an almanac at all\nsecond line\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"x\.al3: line 1: .*not a SEM"):
+    with pytest.raises(readers.AlmanacFileError, match=r"x\.al3: line 1: .*not a SEM"):
         geometry.read_sem(p)
     p.write_text("1 X.AL3\n703\n\n1\n31\n0\n 1.5 0 0\n 5153 0 0\n 0 0 0\n0\n9\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"line 2: expected the week and t_oa"):
+    with pytest.raises(readers.AlmanacFileError, match=r"line 2: expected the week and t_oa"):
         geometry.read_sem(p)
     p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 1.5 0 0\n 5153 0 0\n 0 0 0\n0\n9\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"line 7: e = 1\.5 must be in \[0, 1\)"):
+    with pytest.raises(readers.AlmanacFileError, match=r"line 7: e = 1\.5 must be in \[0, 1\)"):
         geometry.read_sem(p)
 
 
@@ -256,7 +256,7 @@ def test_yuma_integers_out_of_range_name_the_line(shared_data, tmp_path, field, 
     first[k] = value if field == "*" else f"{field:<28s}{value}"
     p = tmp_path / "edit.alm"
     p.write_text("\n".join(first) + "\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"edit\.alm: " + message):
+    with pytest.raises(readers.AlmanacFileError, match=r"edit\.alm: " + message):
         geometry.read_yuma(p)
 
 
@@ -282,7 +282,7 @@ def test_yuma_implausible_orbits_are_refused_with_the_line(shared_data, tmp_path
     assert _line_of(text, line) == int(message.split()[1].rstrip(":"))
     p = tmp_path / "alm.txt"
     p.write_text(text.replace(line, f"{field:<28s}{bad}", 1))
-    with pytest.raises(geometry.AlmanacFileError, match=r"alm\.txt: " + message):
+    with pytest.raises(readers.AlmanacFileError, match=r"alm\.txt: " + message):
         geometry.read_yuma(p)
 
 
@@ -296,13 +296,13 @@ def test_orbit_limits_are_the_constellations_and_hold_every_real_orbit(shared_da
     line = next(ln for ln in gal.splitlines() if ln.startswith("SQRT(A)"))
     p = tmp_path / "gal.txt"
     p.write_text(gal.replace(line, "SQRT(A)  (m 1/2):           5153.6", 1))
-    with pytest.raises(geometry.AlmanacFileError,
+    with pytest.raises(readers.AlmanacFileError,
                        match=rf"gal\.txt: line {_line_of(gal, line)}: satellite \d+: sqrt\(A\) = "
                        r"5153\.6 m\^1/2 is a semi-major axis of 26,560 km, not a Galileo orbit"):
         geometry.read_yuma(p, system="E")
     p = tmp_path / "x.al3"
     p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 0.0 0.0056 0\n 1000.0 0 0\n 0 0 0\n0\n9\n")
-    with pytest.raises(geometry.AlmanacFileError, match=r"x\.al3: line 8: satellite 1: sqrt\(A\) "
+    with pytest.raises(readers.AlmanacFileError, match=r"x\.al3: line 8: satellite 1: sqrt\(A\) "
                        r"= 1000\.0"):
         geometry.read_sem(p)
     p.write_text("1 X.AL3\n703 344064\n\n1\n31\n0\n 0.0 0.0056 0\n 5153.6 0 0\n 0 0 0\n0\n9\n")

@@ -9,7 +9,7 @@ import jax
 import numpy as np
 import pytest
 
-from oaraim import errors, geometry, mc, sim
+from oaraim import errors, mc, readers, sim
 from oaraim.araim import ekf_replay
 from oaraim.execute import run_study
 from oaraim.registry import STUDIES
@@ -22,8 +22,8 @@ def _drive(tmp_path_factory, err):
     key = mc.realization_keys(0, 0, 0, 1)[0]
     rec = sim.synthesize_recording(sc, key, err=err, duration_s=DUR_S)
     folder = tmp_path_factory.mktemp("drive") / "drive"
-    geometry.write_recording(folder, rec)
-    loaded = geometry.load_recording(folder)
+    readers.write_recording(folder, rec)
+    loaded = readers.load_recording(folder)
     tr = ekf_replay.replay_ekf_raim(loaded)
     setup = sim.drive_setup(sc, duration_s=DUR_S)
     summ, direct = sim.simulate_drive(key, setup, err, traces=True)
@@ -160,7 +160,7 @@ def test_bad_recording_folder_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="no meta.json"):
         study.validate({"recording": str(tmp_path)})
     (tmp_path / "meta.json").write_text("{not json")
-    with pytest.raises(geometry.RecordingError, match="meta.json"):
+    with pytest.raises(readers.RecordingError, match="meta.json"):
         run_study("seed000-ekf-raim", realizations=1, out=tmp_path / "out",
                   sets=[f"recording={tmp_path}"], show_progress=False)
 

@@ -5,7 +5,7 @@ import gzip
 import numpy as np
 import pytest
 
-from oaraim import geometry
+from oaraim import geometry, readers
 from oaraim.geometry.kepler import OrbitElements, orbit_ecef
 from oaraim.readers import check_navigation_file, gpstime
 
@@ -17,7 +17,7 @@ def brdc182(shared_data):
 
 @pytest.fixture(scope="module")
 def igs1590_4(shared_data):
-    return geometry.read_sp3(shared_data / "orbits" / "igs15904.sp3")
+    return readers.read_sp3(shared_data / "orbits" / "igs15904.sp3")
 
 
 def test_circular_orbit_by_hand():
@@ -115,8 +115,8 @@ def test_positions_are_continuous_across_record_switches(brdc182):
 
 def test_rinex3_mixed_file_gps_and_galileo(shared_data):
     eph = geometry.load_navigation(shared_data / "nav" / "VILL00ESP_R_20181700000_01D_MN.rnx.gz")
-    gps = eph.prns[eph.constellation == geometry.GPS]
-    gal = eph.prns[eph.constellation == geometry.GALILEO]
+    gps = eph.prns[eph.constellation == readers.GPS]
+    gal = eph.prns[eph.constellation == readers.GALILEO]
     assert gps.size == 32 and gal.size == 18  # data README
     assert list(eph.prns[~eph.sat_healthy & (eph.constellation == 0)]) == ["G04"]
     t = gpstime.gps_seconds(2018, 6, 19) + np.arange(0, 86400, 900.0)
@@ -145,17 +145,17 @@ def test_truncated_file_names_file_and_line(shared_data, tmp_path):
     lines = (shared_data / "nav" / "brdc1820.10n").read_text().splitlines()
     cut = lines[:8 + 8 * 3 + 5]  # header (8 lines), 3 records, then 5 lines of the 4th
     p = _write(tmp_path, "cut.10n", "\n".join(cut) + "\n")
-    with pytest.raises(geometry.NavigationFileError, match=r"cut\.10n: line 37: the file ends "
+    with pytest.raises(readers.NavigationFileError, match=r"cut\.10n: line 37: the file ends "
                        r"inside the record that starts at line 33") as e:
         geometry.load_navigation(p)
     assert isinstance(e.value, ValueError)
     # the same truncated file gzipped (a .gz cut mid-stream is caught too)
     pg = _write(tmp_path, "cut.10n.gz", "\n".join(cut) + "\n", gz=True)
-    with pytest.raises(geometry.NavigationFileError, match="line 37"):
+    with pytest.raises(readers.NavigationFileError, match="line 37"):
         geometry.load_navigation(pg)
     raw = pg.read_bytes()
     (tmp_path / "half.10n.gz").write_bytes(raw[: len(raw) // 2])
-    with pytest.raises(geometry.NavigationFileError, match="half.10n.gz"):
+    with pytest.raises(readers.NavigationFileError, match="half.10n.gz"):
         geometry.load_navigation(tmp_path / "half.10n.gz")
 
 
@@ -164,17 +164,17 @@ def test_malformed_field_and_header(shared_data, tmp_path):
     bad = list(lines[:40])
     bad[12] = bad[12][:3] + "   0.5153X8013973D+04" [:19] + bad[12][22:]
     p = _write(tmp_path, "bad.10n", "\n".join(bad) + "\n")
-    with pytest.raises(geometry.NavigationFileError, match=r"bad\.10n: line 13, columns 4-22"):
+    with pytest.raises(readers.NavigationFileError, match=r"bad\.10n: line 13, columns 4-22"):
         check_navigation_file(p)
     nohead = [s for s in lines[:40] if "END OF HEADER" not in s]
     p = _write(tmp_path, "nohead.10n", "\n".join(nohead) + "\n")
-    with pytest.raises(geometry.NavigationFileError, match="END OF HEADER"):
+    with pytest.raises(readers.NavigationFileError, match="END OF HEADER"):
         geometry.load_navigation(p)
     p = _write(tmp_path, "obs.10o", "     2.11           OBSERVATION DATA    G (GPS)"
                "             RINEX VERSION / TYPE\n")
-    with pytest.raises(geometry.NavigationFileError, match="not a RINEX navigation file"):
+    with pytest.raises(readers.NavigationFileError, match="not a RINEX navigation file"):
         geometry.load_navigation(p)
-    with pytest.raises(geometry.NavigationFileError, match="not found"):
+    with pytest.raises(readers.NavigationFileError, match="not found"):
         geometry.load_navigation(tmp_path / "missing.rnx")
 
 
@@ -207,7 +207,7 @@ def test_unphysical_or_duplicated_records_name_the_line(shared_data, tmp_path, e
     lines = (shared_data / "nav" / "brdc1820.10n").read_text().splitlines()
     records = lines[8:8 + 24]
     p = _write(tmp_path, "edit.10n", "\n".join(lines[:8] + edit(records)) + "\n")
-    with pytest.raises(geometry.NavigationFileError, match=r"edit\.10n: " + message):
+    with pytest.raises(readers.NavigationFileError, match=r"edit\.10n: " + message):
         geometry.load_navigation(p)
 
 
@@ -229,7 +229,7 @@ def test_rinex3_truncated_names_line(shared_data, tmp_path):
     end = next(k for k, s in enumerate(lines) if "END OF HEADER" in s)
     cut = lines[: end + 1 + 8 + 3]
     p = _write(tmp_path, "cut.rnx", "\n".join(cut) + "\n")
-    with pytest.raises(geometry.NavigationFileError,
+    with pytest.raises(readers.NavigationFileError,
                        match=rf"line {end + 12}: the file ends inside the record that starts at "
                        rf"line {end + 10} \(G"):
         geometry.load_navigation(p)
@@ -248,11 +248,11 @@ def test_sp3_reader(igs1590_4):
 
 def test_sp3_errors(tmp_path):
     p = _write(tmp_path, "x.sp3", "hello\n")
-    with pytest.raises(geometry.SP3Error, match="line 1: not an SP3 file"):
-        geometry.read_sp3(p)
+    with pytest.raises(readers.SP3Error, match="line 1: not an SP3 file"):
+        readers.read_sp3(p)
     p = _write(tmp_path, "y.sp3", "#cP2010  7  1  0  0  0.00000000      96 ORBIT\n*  2010  7 x\n")
-    with pytest.raises(geometry.SP3Error, match="line 2: cannot read the epoch"):
-        geometry.read_sp3(p)
+    with pytest.raises(readers.SP3Error, match="line 2: cannot read the epoch"):
+        readers.read_sp3(p)
 
 
 @pytest.mark.parametrize("line, field, value, message", [
@@ -273,7 +273,7 @@ def test_implausible_orbits_name_the_line(shared_data, tmp_path, line, field, va
     records = lines[8:8 + 24]
     records[line] = _field(records[line], field, value)
     p = _write(tmp_path, "edit.10n", "\n".join(lines[:8] + records) + "\n")
-    with pytest.raises(geometry.NavigationFileError, match=r"edit\.10n: " + message):
+    with pytest.raises(readers.NavigationFileError, match=r"edit\.10n: " + message):
         geometry.load_navigation(p)
 
 
@@ -291,7 +291,7 @@ def test_rinex3_galileo_orbit_with_a_gps_semi_major_axis_is_refused(shared_data,
     excerpt[end + 1 + 8 + 2] = _field(excerpt[end + 1 + 8 + 2], 3, "5.153600000000E+03", 4)
     p = _write(tmp_path, "gal.rnx", "\n".join(excerpt) + "\n")
     row = end + 1 + 8 + 3
-    with pytest.raises(geometry.NavigationFileError,
+    with pytest.raises(readers.NavigationFileError,
                        match=rf"gal\.rnx: line {row}, columns 62-80: E01: sqrt\(A\) = 5153\.6 "
                        r"m\^1/2 is a semi-major axis of 26,560 km, not a Galileo orbit"):
         geometry.load_navigation(p)

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy import special
 
-from oaraim import araim, errors, geometry
+from oaraim import araim, errors, geometry, readers
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.araim import filter_monitor as fmon
@@ -259,8 +259,8 @@ def test_replay_of_a_recorded_drive_main_filter_is_the_ekf(tmp_path):
     sc = sim.drive_seed000()
     rec = sim.synthesize_recording(sc, mc.realization_keys(0, 0, 0, 1)[0],
                                    err=errors.ErrorModel.clean(), duration_s=30.0)
-    geometry.write_recording(tmp_path / "drive", rec)
-    loaded = geometry.load_recording(tmp_path / "drive")
+    readers.write_recording(tmp_path / "drive", rec)
+    loaded = readers.load_recording(tmp_path / "drive")
     ref_tr = ekf_replay.replay_ekf_raim(loaded)
     fr = ekf_replay.replay_filter_monitor(loaded)
     np.testing.assert_allclose(fr.monitor.position_m, ref_tr.position_enu_m[0], atol=1e-6)

@@ -28,7 +28,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from oaraim import geometry, sim
+from oaraim import geometry, readers, sim
 from oaraim.readers import navigation, recording, rinex_obs
 from oaraim.studies import availability_map
 from tests.test_almanac import _sem_text
@@ -385,7 +385,7 @@ def _check_almanac(alm):
 @given(mutations=MUTATIONS)
 def test_fuzz_yuma(cases, yuma_excerpt, mutations):
     path = cases.write(mutate(yuma_excerpt, mutations), ".alm")
-    alm = expect_parse_error(geometry.AlmanacFileError, path, lambda: geometry.read_yuma(path))
+    alm = expect_parse_error(readers.AlmanacFileError, path, lambda: geometry.read_yuma(path))
     if alm is not None:
         _check_almanac(alm)
     cases.note("yuma", "ok" if alm is not None else "error")
@@ -395,7 +395,7 @@ def test_fuzz_yuma(cases, yuma_excerpt, mutations):
 @given(mutations=MUTATIONS)
 def test_fuzz_sem(cases, sem_excerpt, mutations):
     path = cases.write(mutate(sem_excerpt, mutations), ".al3")
-    alm = expect_parse_error(geometry.AlmanacFileError, path, lambda: geometry.read_sem(path))
+    alm = expect_parse_error(readers.AlmanacFileError, path, lambda: geometry.read_sem(path))
     if alm is not None:
         _check_almanac(alm)
     cases.note("sem", "ok" if alm is not None else "error")

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from oaraim import geometry
-from oaraim.geometry import gpstime
+from oaraim.readers import gpstime
 from oaraim.registry import STUDIES
 
 STUDY = STUDIES["availability-map"]

@@ -43,7 +43,7 @@ def test_igs_merged_brdc_loads_whole(shared_data, year, n_gps, rec_gps, n_gal, r
     info = check_navigation_file(path)
     assert info["records"] == n_records and info["systems"] == list("CEGIJRS")
     eph = geometry.load_navigation(path)
-    gps, gal = eph.constellation == geometry.GPS, eph.constellation == geometry.GALILEO
+    gps, gal = eph.constellation == readers.GPS, eph.constellation == readers.GALILEO
     assert (gps.sum(), eph.n_records[gps].sum()) == (n_gps, rec_gps)
     assert (gal.sum(), eph.n_records[gal].sum()) == (n_gal, rec_gal)
     assert sorted(eph.prns[~eph.sat_healthy]) == unhealthy
@@ -127,7 +127,7 @@ def test_layout_is_not_meaning(shared_data, tmp_path):
     # a record repeated with another layout is a duplicate, named with both lines
     dup = _write(tmp_path, "dup.rnx", lines[:end + 1] + [s for r in recs for s in r]
                  + relayout(recs[0], 1))
-    with pytest.raises(geometry.NavigationFileError,
+    with pytest.raises(readers.NavigationFileError,
                        match=rf"dup\.rnx: line {end + 2 + 60 * 8}: the record of "
                              rf"{recs[0][0][:3]} repeats the record at line {end + 2} exactly"):
         geometry.load_navigation(dup)
@@ -139,8 +139,8 @@ def test_single_system_gn_en_files(shared_data, tmp_path):
     lines = _lines(shared_data / BRDC[2024])
     end = _header_end(lines)
     mixed = geometry.load_navigation(shared_data / BRDC[2024])
-    for sysch, label, code in (("G", "G: GPS", geometry.GPS), ("E", "E: GALILEO",
-                                                               geometry.GALILEO)):
+    for sysch, label, code in (("G", "G: GPS", readers.GPS), ("E", "E: GALILEO",
+                                                               readers.GALILEO)):
         head = [lines[0][:20] + f"{'N: GNSS NAV DATA':20s}{label:20s}" + lines[0][60:]]
         head += [s for s in lines[1:end + 1] if s[60:80].strip() != "IONOSPHERIC CORR"
                  or s[:3] == ("GPS" if sysch == "G" else "GAL")]
@@ -152,7 +152,7 @@ def test_single_system_gn_en_files(shared_data, tmp_path):
         assert list(eph.prns) == list(mixed.prns[m])
         assert eph.n_records.tolist() == mixed.n_records[m].tolist()
         if sysch == "E":  # no GPS records: the replay's GPS extras say so
-            with pytest.raises(geometry.NavigationFileError, match="no GPS records"):
+            with pytest.raises(readers.NavigationFileError, match="no GPS records"):
                 geometry.load_navigation(p, systems=("G",))
 
 
@@ -169,7 +169,7 @@ def test_glonass_305_records_have_five_lines(shared_data, tmp_path):
     assert np.isnan(f["StatusFlags"]) and f["DelayL1L2"] == pytest.approx(0.999999999999e9)
     cut = lines[:end + 1] + lines[k:k + 4] + lines[k + 5:k + 15]
     p = _write(tmp_path, "cut.rnx", cut)
-    with pytest.raises(geometry.NavigationFileError, match=rf"cut\.rnx: line {end + 6}, column 1: "
+    with pytest.raises(readers.NavigationFileError, match=rf"cut\.rnx: line {end + 6}, column 1: "
                        "unexpected character 'R'"):
         check_navigation_file(p)
 
@@ -190,7 +190,7 @@ def test_meaning_checks_name_the_line(shared_data, tmp_path, edit, message):
     msg = message.replace("line ", "line ", 1)
     n = int(msg.split("line ")[1].split(",")[0].split(":")[0])
     msg = msg.replace(f"line {n}", f"line {end + 1 + n}", 1)
-    with pytest.raises(geometry.NavigationFileError, match=r"bad\.rnx: " + msg):
+    with pytest.raises(readers.NavigationFileError, match=r"bad\.rnx: " + msg):
         geometry.load_navigation(p)
 
 

@@ -8,7 +8,7 @@ import gzip
 import numpy as np
 import pytest
 
-from oaraim import geometry
+from oaraim import readers
 from oaraim.readers import gpstime, rinex_obs
 
 TLSE = "obs3/TLSE00FRA_R_20240011800_01H_30S_MO.crx.gz"
@@ -245,7 +245,7 @@ def test_rinex2_table_matches_the_l1_reader(shared_data):
     path = shared_data / "obs" / "07590920.05o"
     t = rinex_obs.read_observation_table(path)
     assert t.types == {"G": ("L1", "C1", "L2", "P2")} and t.version == 2.1
-    obs = geometry.read_observations(path)
+    obs = readers.read_observations(path)
     np.testing.assert_array_equal(obs.pseudorange_m,
                                   np.nan_to_num(t.select("G").values["C1"])[:, :obs.sv.size])
     assert list(obs.sv) == list(t.sv)

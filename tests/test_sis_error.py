@@ -6,7 +6,7 @@ import gzip
 import numpy as np
 import pytest
 
-from oaraim import errors, geometry
+from oaraim import errors, geometry, readers
 from oaraim.constants import C_M_S, OMEGA_E_GNSS_RAD_S
 from oaraim.readers import ClockFileError, galileo_nav, gpstime, read_clock_rinex
 
@@ -110,7 +110,7 @@ def test_clock_file_layouts_and_errors(tmp_path):
 
 @pytest.fixture(scope="module")
 def day(shared_data):
-    sp = geometry.read_sp3(shared_data / SP3)
+    sp = readers.read_sp3(shared_data / SP3)
     ck = read_clock_rinex(shared_data / CLK, systems="GE")
     fnav = geometry.load_navigation(shared_data / NAV, galileo_source="fnav")
     inav = geometry.load_navigation(shared_data / NAV, galileo_source="inav")
@@ -208,7 +208,7 @@ def test_beidou_broadcast_vs_precise(shared_data):
     from oaraim.constants import SISRE_WEIGHTS
     from oaraim.geometry import beidou_nav
 
-    sp = geometry.read_sp3(shared_data / SP3)
+    sp = readers.read_sp3(shared_data / SP3)
     ck = read_clock_rinex(shared_data / CLK, systems="C")
     bds = beidou_nav.load_beidou(shared_data / NAV)
     assert not {int(p[1:]) for p in bds.prns} & beidou_nav.GEO_PRNS

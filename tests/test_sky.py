@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from oaraim import araim, geometry
+from oaraim import araim, geometry, readers
 from oaraim.readers import gpstime
 
 MDSCC_ECEF_M = np.array([4849210.0, -360329.7, 4114920.0])  # DESIGN.md corrected y
@@ -31,10 +31,10 @@ def test_visibility_real_gps_and_galileo_madrid_day(shared_data):
     Measured (Villafranca file, MDSCC, 2018-06-19): GPS 5-11, below 6 for 1.9 % of the epochs;
     Galileo (14 healthy in June 2018) 2-5."""
     s = geometry.sky(MDSCC_ECEF_M, DAY_30S, source=shared_data / VILL, mask_deg=15.0)
-    n = _counts(s, geometry.GPS)
+    n = _counts(s, readers.GPS)
     assert n.min() >= 5 and n.max() <= 12
     assert np.mean(n < 6) < 0.05
-    ng = _counts(s, geometry.GALILEO)
+    ng = _counts(s, readers.GALILEO)
     assert ng.max() <= 8 and ng.mean() > 1.0
     assert not np.asarray(s.valid)[:, list(s.sv).index("G04")].any()  # unhealthy all day
 

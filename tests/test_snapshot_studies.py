@@ -4,7 +4,7 @@ recording round trip of the synthesis (sim.gnss)."""
 import numpy as np
 import pytest
 
-from oaraim import geometry, sim
+from oaraim import readers, sim
 from oaraim.geometry import epoch_geometry
 from oaraim.registry import STUDIES
 from oaraim.studies.seed004_uav import synthesize
@@ -73,8 +73,8 @@ def test_recording_round_trip_replays_identically(tmp_path, shared_data):
     geom, pr, corr, _ = synthesize(p, 0)
     sig = np.where(geom.is_gps, 1.0, 2.0)
     rec = sim.to_recording(geom, pr, sigma_m=sig, name="uav-test")
-    folder = geometry.write_recording(tmp_path / "uav", rec)
-    m = epoch_geometry.from_recording(geometry.load_recording(folder), p["mask_deg"])
+    folder = readers.write_recording(tmp_path / "uav", rec)
+    m = epoch_geometry.from_recording(readers.load_recording(folder), p["mask_deg"])
     assert list(m.geom.ids) == list(geom.ids)
     assert np.array_equal(m.geom.valid, geom.valid)
     assert np.allclose(m.pseudorange_m + m.correction_m, pr + corr, atol=1e-6)

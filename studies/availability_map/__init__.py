@@ -46,8 +46,9 @@ from oaraim.araim import (
 from oaraim.araim import availability as av
 from oaraim.batching import jit_kernel, map_tiles, materialize
 from oaraim.errors import AIRBORNE_MODELS, gnss_variances, sop_variances
-from oaraim.geometry import GALILEO, GPS, azimuth, elevation, line_of_sight
+from oaraim.geometry import azimuth, elevation, line_of_sight
 from oaraim.mc import Values
+from oaraim.readers import GALILEO, GPS
 from oaraim.studies.availability_map import leo as leo_option
 from oaraim.studies.availability_map.coastlines import parse_coastlines
 from oaraim.studies.availability_map.compare import coverage_table, pl_difference, point_maps

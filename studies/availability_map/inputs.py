@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from oaraim.geometry import MIN_SEPARATION_M, first_near_pair, geodetic_to_ecef
+from oaraim.geometry import geodetic_to_ecef
+from oaraim.readers import MIN_SEPARATION_M, first_near_pair
 from oaraim.studies.base import in_range, keyword_or_file, positive
 
 # ------------------------------------------------------------------------------------ grids

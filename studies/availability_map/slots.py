@@ -12,7 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from oaraim import data, geometry
-from oaraim.geometry import GALILEO, GPS, Ephemeris, elevation, look_angles, resolve_source
+from oaraim.geometry import Ephemeris, elevation, look_angles, resolve_source
+from oaraim.readers import GALILEO, GPS
 from oaraim.studies.common import sky
 
 GPS_ALMANAC = "almanac/almmops.txt"
