@@ -384,7 +384,7 @@ def test_tower_csv_with_a_byte_order_mark_and_shared_masts(tmp_path):
 def test_near_duplicate_towers_are_refused(tmp_path, extra, message):
     """Two rows of one carrier 1e-9 deg apart (0.1 mm) passed the exact duplicate check and
     counted as two independent ranges. Rows of one carrier closer than 1 m
-    (``geometry.transmitters.MIN_SEPARATION_M``) are one transmitter given twice; 1.5 m apart,
+    (``readers.MIN_SEPARATION_M``) are one transmitter given twice; 1.5 m apart,
     or the same mast for another carrier, are two."""
     f = tmp_path / "towers.csv"
     f.write_text(GOOD_TOWERS + extra)

@@ -1,4 +1,4 @@
-"""Recorded-data format (geometry.recording): round trips, the loader's rejections (each names
+"""Recorded-data format (readers.recording): round trips, the loader's rejections (each names
 file, column and row), pivoting to padded (epoch, source) arrays, frames and clocks."""
 
 import json
@@ -436,7 +436,7 @@ def test_csv_floats_round_trip_bit_exact(tmp_path):
 def test_near_duplicate_transmitters_are_refused(rec, tmp_path, dx_m, message):
     """A transmitter listed again 0.1 mm from itself under a new id passed the exact duplicate
     check and counted as a second independent range. Transmitters of one clock group closer
-    than 1 m (``geometry.transmitters.MIN_SEPARATION_M``) are one given twice; 2 m apart, two."""
+    than 1 m (``readers.MIN_SEPARATION_M``) are one given twice; 2 m apart, two."""
     tables = {k: v.copy() for k, v in _tables(rec).items()}
     tx = tables["transmitters"]
     again = tx.iloc[[0]].copy()

@@ -102,7 +102,7 @@ def read_towers(path):
     (sorted; carrier k becomes SOP constellation 2 + k). UTF-8, a byte-order mark accepted
     (Excel's "CSV UTF-8"); bytes that are not UTF-8, broken quoting, a short or long row, a
     non-number, a value out of range, a row given twice (two rows of one carrier closer than
-    ``geometry.transmitters.MIN_SEPARATION_M``, 1 m) or a last line without its line break (a
+    ``readers.MIN_SEPARATION_M``, 1 m) or a last line without its line break (a
     file cut short) is a ``TowerFileError`` (a ValueError) naming the file and line."""
     need = ("lat_deg", "lon_deg", "height_m", "carrier")
     raw = Path(path).read_bytes()
