@@ -100,6 +100,7 @@ __all__ = [
 
 from oaraim.araim import ekf, ekf_raim
 from oaraim.araim.ekf import (
+    EkfInputs,
     EkfParams,
     EkfState,
     ekf_init,
@@ -108,11 +109,11 @@ from oaraim.araim.ekf import (
     ekf_update,
     run_ekf,
 )
-from oaraim.araim.ekf_raim import RaimConfig, run_ekf_raim
+from oaraim.araim.ekf_raim import RaimConfig, RaimOptions, run_ekf_raim
 
 __all__ += [
-    "EkfParams", "EkfState", "RaimConfig", "ekf", "ekf_init", "ekf_predict", "ekf_raim",
-    "ekf_step", "ekf_update", "run_ekf", "run_ekf_raim",
+    "EkfInputs", "EkfParams", "EkfState", "RaimConfig", "RaimOptions", "ekf", "ekf_init",
+    "ekf_predict", "ekf_raim", "ekf_step", "ekf_update", "run_ekf", "run_ekf_raim",
 ]
 
 from oaraim.araim import snapshot  # noqa: E402
@@ -128,6 +129,8 @@ __all__ += ["MonitorReplay", "ReplayConfig", "ReplayResult", "replay", "replay_m
 
 from oaraim.araim import filter_monitor  # noqa: E402
 from oaraim.araim.filter_monitor import (  # noqa: E402
+    BankOptions,
+    BankSources,
     FilterMonitorEpoch,
     LinearModel,
     run_ekf_monitor,
@@ -135,8 +138,8 @@ from oaraim.araim.filter_monitor import (  # noqa: E402
     separation_monitor,
 )
 
-__all__ += ["FilterMonitorEpoch", "LinearModel", "filter_monitor", "run_ekf_monitor",
-            "run_linear_monitor", "separation_monitor"]
+__all__ += ["BankOptions", "BankSources", "FilterMonitorEpoch", "LinearModel", "filter_monitor",
+            "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
 
 # What the other layers use, through this face only (tools/structure.py: "imports past a
 # package's face"); ``mhss``, ``availability`` and ``integrity_risk`` are namespaces.

@@ -78,6 +78,20 @@ class EkfState(NamedTuple):
     """(17, 17) error-state covariance, order [theta, r, v, b_g, b_a, x_clk]."""
 
 
+class EkfInputs(NamedTuple):
+    """The seed 000 EKF's inputs of one epoch, or stacked over E epochs (a leading axis E on
+    every field): the interval's IMU samples ``gyro``, ``accel`` (n, 3) (rad/s, m/s^2), the
+    pseudoranges ``z`` (L,) (m), which are ``valid`` (L,) bool, the towers' clocks ``tx_clk_m``
+    (L,) = c dt_sn (m) and the pseudorange sigma ``sigma_m`` (scalar or (L,), m)."""
+
+    gyro: jnp.ndarray
+    accel: jnp.ndarray
+    z: jnp.ndarray
+    valid: jnp.ndarray
+    tx_clk_m: jnp.ndarray
+    sigma_m: jnp.ndarray
+
+
 class EkfParams(NamedTuple):
     """Model of the filter (all SI). ``gyro_psd``/``accel_psd``: white-noise PSDs (density^2);
     ``*_bias_psd``: GM driving PSDs 2 sigma^2 / tau; ``*_bias_inv_tau``: 1 / tau (0 = random
@@ -379,6 +393,16 @@ def ekf_predict(state: EkfState, gyro: Float[ArrayLike, "n 3"], accel: Float[Arr
     the interval-mean A. Returns ``(state, phi)``; ``phi`` is also what the Xi recursion of
     seed 000 section III-B needs.
     """
+    state, phi, _ = ekf_propagate(state, gyro, accel, params)
+    return state, phi
+
+
+def ekf_propagate(state: EkfState, gyro: Float[ArrayLike, "n 3"],
+                  accel: Float[ArrayLike, "n 3"], params: EkfParams
+                  ) -> tuple[EkfState, Float[Array, "17 17"], Float[Array, "17 17"]]:
+    """``ekf_predict`` that also returns the interval's process noise Q_d (17, 17): (state,
+    Phi, Q_d). A bank of error-state filters linearised about this state's trajectory
+    propagates each member's covariance with the same Phi and Q_d (``araim.filter_monitor``)."""
     n = gyro.shape[0]
     t_int = n * params.dt_s
 
@@ -387,7 +411,7 @@ def ekf_predict(state: EkfState, gyro: Float[ArrayLike, "n 3"], accel: Float[Arr
     phi, qd = transition_and_noise(w_sum / n, ct_sum / n, cta_sum / n, params, t_int)
     p = phi @ state.P @ phi.T + qd
     clk = clock_transition(t_int) @ state.clk
-    return EkfState(q, r, v, bg, ba, clk, 0.5 * (p + p.T)), phi
+    return EkfState(q, r, v, bg, ba, clk, 0.5 * (p + p.T)), phi, qd
 
 
 # ------------------------------------------------------------------------------------------
@@ -491,22 +515,30 @@ def kalman_update(state: EkfState, nu, u, r_var, used, s_inv=None):
     It stays valid for the suboptimal gains exclusion produces (tested against the product form).
     Returns ``(state, UpdateInfo)``.
     """
-    pht = pr_rows_times(state.P, u, used).T
+    dx, p, info = error_state_update(state.P, nu, u, r_var, used, s_inv)
+    return inject(state, dx, p), info
+
+
+def error_state_update(P, nu, u, r_var, used, s_inv=None):
+    """The error-state part of ``kalman_update`` (same arguments, the covariance ``P`` (17, 17)
+    for the state): the correction dx = K nu (17,), the Joseph-form P+ and the ``UpdateInfo``,
+    nothing injected. Returns ``(dx, P+, UpdateInfo)``."""
+    pht = pr_rows_times(P, u, used).T
     ru = jnp.where(used, r_var, 1.0)
     if s_inv is None:
-        _, s_inv = innovation_covariance(state.P, u, r_var, used)
+        _, s_inv = innovation_covariance(P, u, r_var, used)
     s = pr_rows_times(pht, u, used) + jnp.diag(ru)
     nu_u = jnp.where(used, nu, 0.0)
     k = pht @ s_inv
     dx = k @ nu_u
     left = jnp.concatenate([k @ s - pht, -k], 1)
     right = jnp.concatenate([k, pht], 1)
-    p = state.P + left @ right.T
+    p = P + left @ right.T
     p = 0.5 * (p + p.T)
     nis = nu_u @ s_inv @ nu_u
     hu = jacobian_rows(u) * used[:, None]
     info = UpdateInfo(nu_u, hu, s_inv, k, nis, jnp.sum(used))
-    return inject(state, dx, p), info
+    return dx, p, info
 
 
 def ekf_update(state: EkfState, z: Float[ArrayLike, " L"], used: Bool[ArrayLike, " L"],
@@ -519,14 +551,13 @@ def ekf_update(state: EkfState, z: Float[ArrayLike, " L"], used: Bool[ArrayLike,
     return kalman_update(state, z - z_hat, u, r_var, used)
 
 
-def ekf_step(state: EkfState, gyro: Float[ArrayLike, "n 3"], accel: Float[ArrayLike, "n 3"],
-             z: Float[ArrayLike, " L"], used: Bool[ArrayLike, " L"],
-             tx_pos: Float[ArrayLike, "L 3"], tx_clk_m: Float[ArrayLike, " L"],
-             sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""], params: EkfParams
-             ) -> tuple[EkfState, UpdateInfo]:
-    """Predict over one interval of IMU samples, then update with that epoch's pseudoranges."""
-    state, _ = ekf_predict(state, gyro, accel, params)
-    return ekf_update(state, z, used, tx_pos, tx_clk_m, sigma_m)
+def ekf_step(state: EkfState, inputs: EkfInputs, tx_pos: Float[ArrayLike, "L 3"],
+             params: EkfParams) -> tuple[EkfState, UpdateInfo]:
+    """Predict over one interval of IMU samples, then update with that epoch's pseudoranges
+    (``inputs`` one epoch's ``EkfInputs``: gyro, accel (n, 3); z, valid (the towers used),
+    tx_clk_m (L,); sigma_m scalar or (L,))."""
+    state, _ = ekf_predict(state, inputs.gyro, inputs.accel, params)
+    return ekf_update(state, inputs.z, inputs.valid, tx_pos, inputs.tx_clk_m, inputs.sigma_m)
 
 
 def ekf_init(q: Real[ArrayLike, "4"] | Sequence[float],
@@ -555,21 +586,19 @@ class EkfOutput(NamedTuple):
     n_used: jnp.ndarray
 
 
-def run_ekf(state0: EkfState, gyro: Float[ArrayLike, "E n 3"], accel: Float[ArrayLike, "E n 3"],
-            z: Float[ArrayLike, "E L"], valid: Bool[ArrayLike, "E L"],
-            tx_pos: Float[ArrayLike, "L 3"], tx_clk_m: Float[ArrayLike, "E L"],
-            sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""], params: EkfParams
-            ) -> tuple[EkfState, EkfOutput]:
+def run_ekf(state0: EkfState, inputs: EkfInputs, tx_pos: Float[ArrayLike, "L 3"],
+            params: EkfParams) -> tuple[EkfState, EkfOutput]:
     """Run the EKF over E epochs with ``lax.scan``.
 
-    ``gyro``, ``accel``: (E, n, 3) IMU samples of each interval (n per pseudorange epoch);
-    ``z``, ``valid``, ``tx_clk_m``: (E, L); ``tx_pos``: (L, 3). Returns (final state, EkfOutput
+    ``inputs``: ``EkfInputs`` stacked over E epochs: ``gyro``, ``accel`` (E, n, 3) IMU samples
+    of each interval (n per pseudorange epoch); ``z``, ``valid``, ``tx_clk_m`` (E, L);
+    ``sigma_m`` scalar, (L,) or (E, L). ``tx_pos``: (L, 3). Returns (final state, EkfOutput
     stacked over epochs).
     """
+    sigma = jnp.broadcast_to(jnp.asarray(inputs.sigma_m, jnp.float64), inputs.z.shape)
 
     def body(state, inp):
-        g, a, zz, vv, tc = inp
-        state, info = ekf_step(state, g, a, zz, vv, tx_pos, tc, sigma_m, params)
+        state, info = ekf_step(state, inp, tx_pos, params)
         return state, EkfOutput(*state, info.nis, info.n_used)
 
-    return jax.lax.scan(body, state0, (gyro, accel, z, valid, tx_clk_m))
+    return jax.lax.scan(body, state0, inputs._replace(sigma_m=sigma))

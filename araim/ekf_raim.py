@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
-from jaxtyping import Array, Bool, Float, Real
+from jaxtyping import Array, Float
 
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.chi2 import detection_threshold, noncentrality
@@ -154,13 +154,28 @@ def raim_init(state: _ekf.EkfState, n_towers: int) -> RaimCarry:
                      jnp.asarray(True))
 
 
-def raim_update(carry: RaimCarry, state_prior, phi, z, valid, tx_pos, tx_clk_m, sigma_m,
-                tables: RaimTables, dof_offset, exclude, hal_m):
+class RaimOptions(NamedTuple):
+    """What ``raim_update`` and ``run_ekf_raim`` test with: the ``tables`` of ``raim_tables``,
+    the ``dof_offset`` (0: d = N_s, seed 002; 4: d = N_s - 4, seed 000), ``exclude`` (bool, may
+    be traced: exclusion on) and the alert limit ``hal_m`` (m)."""
+
+    tables: RaimTables
+    dof_offset: int = 0
+    exclude: bool = True
+    hal_m: float = 30.0
+
+
+def raim_update(carry: RaimCarry, state_prior, phi, inputs: _ekf.EkfInputs, tx_pos,
+                options: RaimOptions):
     """Detection, exclusion, update, Xi and HPL for one epoch (steps 1-5 of the module doc).
 
-    ``state_prior``/``phi`` come from ``ekf_predict``; ``exclude`` (bool, may be traced) turns
-    exclusion on. Returns ``(new carry, RaimEpoch)``.
+    ``state_prior``/``phi`` come from ``ekf_predict``; ``inputs`` the epoch's
+    ``araim.ekf.EkfInputs`` (its ``z``, ``valid``, ``tx_clk_m``, ``sigma_m``; the IMU samples
+    are not read); ``tx_pos`` (L, 3); ``options`` the tables, dof offset, exclusion switch and
+    HAL. Returns ``(new carry, RaimEpoch)``.
     """
+    z, valid, tx_clk_m, sigma_m = inputs.z, inputs.valid, inputs.tx_clk_m, inputs.sigma_m
+    tables, dof_offset, exclude, hal_m = options
     z_hat, u = _ekf.pseudorange_model(state_prior.r, state_prior.clk, tx_pos, tx_clk_m)
     r_var = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64) ** 2, z_hat.shape)
     nu = z - z_hat
@@ -186,27 +201,22 @@ def raim_update(carry: RaimCarry, state_prior, phi, z, valid, tx_pos, tx_clk_m, 
     return RaimCarry(state, xi, used, jnp.asarray(False)), out
 
 
-def run_ekf_raim(state0: _ekf.EkfState, gyro: Float[ArrayLike, "E n 3"],
-                 accel: Float[ArrayLike, "E n 3"], z: Float[ArrayLike, "E L"],
-                 valid: Bool[ArrayLike, "E L"], tx_pos: Float[ArrayLike, "L 3"],
-                 tx_clk_m: Float[ArrayLike, "E L"],
-                 sigma_m: Real[ArrayLike, "#L"] | Real[ArrayLike, ""],
-                 params: _ekf.EkfParams, tables: RaimTables, dof_offset: int = 0,
-                 exclude: bool | Bool[ArrayLike, ""] = True, hal_m: float = 30.0
+def run_ekf_raim(state0: _ekf.EkfState, inputs: _ekf.EkfInputs,
+                 tx_pos: Float[ArrayLike, "L 3"], params: _ekf.EkfParams, options: RaimOptions
                  ) -> tuple[RaimCarry, tuple[Float[Array, "E 3"], RaimEpoch]]:
-    """EKF + RAIM over E epochs of recorded data (lax.scan). ``gyro``/``accel`` (E, n, 3),
-    ``z``/``valid``/``tx_clk_m`` (E, L). Returns (final carry, (EkfOutput-like position r (E, 3),
-    RaimEpoch stacked))."""
+    """EKF + RAIM over E epochs of recorded data (lax.scan). ``inputs``: ``araim.ekf.EkfInputs``
+    stacked over E epochs (``gyro``/``accel`` (E, n, 3), ``z``/``valid``/``tx_clk_m`` (E, L),
+    ``sigma_m`` scalar, (L,) or (E, L)); ``options``: ``RaimOptions``. Returns (final carry,
+    (EkfOutput-like position r (E, 3), RaimEpoch stacked))."""
     carry0 = raim_init(state0, tx_pos.shape[0])
+    sigma = jnp.broadcast_to(jnp.asarray(inputs.sigma_m, jnp.float64), inputs.z.shape)
 
     def body(carry, inp):
-        g, a, zz, vv, tc = inp
-        prior, phi = _ekf.ekf_predict(carry.state, g, a, params)
-        carry, out = raim_update(carry, prior, phi, zz, vv, tx_pos, tc, sigma_m, tables,
-                                 dof_offset, exclude, hal_m)
+        prior, phi = _ekf.ekf_predict(carry.state, inp.gyro, inp.accel, params)
+        carry, out = raim_update(carry, prior, phi, inp, tx_pos, options)
         return carry, (carry.state.r, out)
 
-    return jax.lax.scan(body, carry0, (gyro, accel, z, valid, tx_clk_m))
+    return jax.lax.scan(body, carry0, inputs._replace(sigma_m=sigma))
 
 
 # ------------------------------------------------------------------------------------------

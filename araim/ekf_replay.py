@@ -110,8 +110,8 @@ def _replay_scan(est0, gyro, accel, z, valid, sigma, tx_pos, tx_clk, params, tab
 
         def one_filter(cf, excl):
             prior, phi = _ekf.ekf_predict(cf.state, g, a, params)
-            cf, out = _er.raim_update(cf, prior, phi, zz, vv, tx_pos, tc, ss, tables,
-                                      dof_offset, excl, hal_m)
+            cf, out = _er.raim_update(cf, prior, phi, _ekf.EkfInputs(g, a, zz, vv, tc, ss),
+                                      tx_pos, _er.RaimOptions(tables, dof_offset, excl, hal_m))
             sd = jnp.sqrt(jnp.diagonal(cf.state.P)[_ekf.POS])
             return cf, (cf.state.r, sd, out)
 
@@ -345,32 +345,54 @@ class FilterReplay(NamedTuple):
     """Where the initial state came from (module docstring)."""
 
 
-def replay_filter_monitor(rec: recording.Recording, *, sigma_pr_m: float = 2.0,
-                          budget: IntegrityBudget = BUDGET_SEED004_TABLE_I, p_sat: float = 1e-5,
-                          p_const: float = 1e-8, fault_modes: str = "add-v4.2",
-                          spec: imu.ImuSpec | None = None,
-                          init_uncertainty: _er.InitialUncertainty | None = None,
-                          initial: dict | None = None, exclusion: bool = False) -> FilterReplay:
+class FilterReplayConfig(NamedTuple):
+    """Settings of ``replay_filter_monitor``: the pseudorange sigma ``sigma_pr_m`` (m), the
+    integrity ``budget``, P_s ``p_sat`` per tower and epoch, P_const ``p_const`` of the one
+    operator, the ``fault_modes`` convention (order 1), the IMU ``spec`` (None: the
+    recording's), the initial uncertainty ``init_uncertainty`` and state ``initial`` (as
+    ``replay_ekf_raim``), ``exclusion`` by restart and the sub-filters' ``linearisation``
+    (``araim.filter_monitor.LINEARISATIONS``)."""
+
+    sigma_pr_m: float = 2.0
+    budget: IntegrityBudget = BUDGET_SEED004_TABLE_I
+    p_sat: float = 1e-5
+    p_const: float = 1e-8
+    fault_modes: str = "add-v4.2"
+    spec: imu.ImuSpec | None = None
+    init_uncertainty: _er.InitialUncertainty | None = None
+    initial: dict | None = None
+    exclusion: bool = False
+    linearisation: str = "main"
+
+
+def replay_filter_monitor(rec: recording.Recording,
+                          config: FilterReplayConfig | None = None) -> FilterReplay:
     """The solution-separation filter bank (``araim.run_ekf_monitor``, docs/filter-integrity.md)
     over a recorded drive: the same preparation, initial state and EKF as ``replay_ekf_raim``,
-    every tower one source of one operator (P_s ``p_sat`` per epoch, P_const ``p_const``),
-    order 1 of ``fault_modes``; ``exclusion``: exclusion by restart
-    (``araim.filter_monitor.exclusion_restart``)."""
+    every tower one source of one operator (P_s ``config.p_sat`` per epoch, P_const
+    ``config.p_const``), order 1 of ``config.fault_modes``; ``config.exclusion``: exclusion by
+    restart (``araim.filter_monitor.exclusion_restart``)."""
+    c = FilterReplayConfig() if config is None else config
+    sigma_pr_m, spec, init_uncertainty = c.sigma_pr_m, c.spec, c.init_uncertainty
     init_uncertainty = _er.InitialUncertainty() if init_uncertainty is None else init_uncertainty
     if not (np.isfinite(sigma_pr_m) and sigma_pr_m > 0):
         raise ValueError(f"sigma_pr_m must be a positive number, got {sigma_pr_m!r}")
     spec = _imu_spec(rec, spec)
     prep = _prepare(rec, sigma_pr_m)
-    est0, src = _initial_state(rec, prep, initial, _er.initial_covariance(spec, init_uncertainty))
+    est0, src = _initial_state(rec, prep, c.initial,
+                               _er.initial_covariance(spec, init_uncertainty))
     o = rec.meta["origin"]
     grav = np.array([0.0, 0.0, -frames.normal_gravity_mps2(np.deg2rad(o["lat_deg"]), o["h_m"])])
     params = _ekf.params_from_imu(spec, prep.dt_s, grav)
     n_t = prep.towers.shape[0]
-    _, out = _fm.run_ekf_monitor(
-        est0, jnp.asarray(prep.gyro), jnp.asarray(prep.accel), jnp.asarray(prep.z),
-        jnp.asarray(prep.valid), jnp.asarray(prep.towers), jnp.asarray(prep.tx_clk),
-        jnp.asarray(prep.sigma), params, np.zeros(n_t, int), np.full(n_t, p_sat),
-        np.array([p_const]), budget, 1, fault_modes, exclusion=bool(exclusion))
+    inputs = _ekf.EkfInputs(jnp.asarray(prep.gyro), jnp.asarray(prep.accel),
+                            jnp.asarray(prep.z), jnp.asarray(prep.valid),
+                            jnp.asarray(prep.tx_clk), jnp.asarray(prep.sigma))
+    sources = _fm.BankSources(np.zeros(n_t, int), np.full(n_t, c.p_sat), np.array([c.p_const]))
+    options = _fm.BankOptions(c.budget, 1, c.fault_modes, exclusion=bool(c.exclusion),
+                              linearisation=c.linearisation)
+    _, out = _fm.run_ekf_monitor(est0, inputs, jnp.asarray(prep.towers), params, sources,
+                                 options)
     out = jax.tree.map(np.asarray, out)
     err2 = None
     if rec.truth is not None:

@@ -23,8 +23,11 @@ tests/test_filter_monitor.py).
 
 Two banks: ``run_linear_monitor`` (a linear model x+ = Phi x + w, z = H x + v, information-form
 measurement update, exact for a diffuse prior) and ``run_ekf_monitor`` (the LTE + IMU
-error-state EKF of seed 000, ``araim.ekf``: every sub-filter a full EKF with its own nominal
-state). ``separation_monitor`` turns one epoch of a bank (means and covariances) into the PLs.
+error-state EKF of seed 000, ``araim.ekf``: the main filter is that EKF and every sub-filter
+an error-state filter about its trajectory, so P_i - P_0 is the separation's covariance;
+``linearisation='own'`` keeps the earlier bank of full EKFs, each about its own estimate, whose
+separations have heavier tails than P_i - P_0 says: docs/filter-integrity.md).
+``separation_monitor`` turns one epoch of a bank (means and covariances) into the PLs.
 Nominal biases (b_nom of the snapshot) are not modelled: the bank's model must carry them
 (Gauss-Markov states or an overbounding noise; docs/filter-integrity.md).
 """
@@ -51,9 +54,45 @@ from oaraim.araim.mhss.projection import ZERO_SEPARATION_RTOL, Projection
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.status import Status
 
-__all__ = ["FilterMonitorEpoch", "LinearModel", "ekf_bank_step", "epoch_modes_and_used",
-           "exclusion_restart", "false_alert_factors", "linear_update", "n_bank_filters",
-           "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
+__all__ = ["BankOptions", "BankSources", "FilterMonitorEpoch", "LINEARISATIONS", "LinearModel",
+           "ekf_bank_step", "epoch_modes_and_used", "exclusion_restart", "false_alert_factors",
+           "linear_update", "n_bank_filters", "run_ekf_monitor", "run_linear_monitor",
+           "separation_monitor"]
+
+#: how the EKF bank linearises its sub-filters: 'main' (every sub-filter an error-state filter
+#: about the main filter's trajectory: one mechanization, common Phi, Q_d and H; the separation
+#: is linear in the innovations and P_i - P_0 its covariance, docs/filter-integrity.md) or 'own'
+#: (every sub-filter a full EKF linearised at its own estimate; its separation carries the
+#: filters' different second-order terms, which P_i - P_0 does not describe)
+LINEARISATIONS = ("main", "own")
+
+
+class BankSources(NamedTuple):
+    """The sources' fault-mode inputs: ``constellation`` (L,) int labels 0..C-1, ``p_sat`` (L,)
+    or (E, L) per-epoch priors P_s, ``p_const`` (C,) per-epoch priors P_const."""
+
+    constellation: jax.Array
+    p_sat: jax.Array
+    p_const: jax.Array
+
+
+class BankOptions(NamedTuple):
+    """Static settings of a bank (hashable): the integrity ``budget``, the fault-mode
+    ``max_order`` and convention ``fault_modes``, the PL root finder's ``iterations``,
+    ``exclusion`` by restart (``exclusion_restart``) and the EKF bank's ``linearisation``
+    (``LINEARISATIONS``; the linear bank has one)."""
+
+    budget: IntegrityBudget
+    max_order: int = 1
+    fault_modes: str | FaultModeRule = DEFAULT_RULE
+    iterations: int = PL_ITERATIONS
+    exclusion: bool = False
+    linearisation: str = "main"
+
+
+def _check_linearisation(name):
+    if name not in LINEARISATIONS:
+        raise ValueError(f"linearisation must be one of {LINEARISATIONS}, got {name!r}")
 
 
 class FilterMonitorEpoch(NamedTuple):
@@ -245,26 +284,32 @@ def linear_update(x, p, h, z, r_var, used):
     return x + p_new @ (h.T @ (w * nu)), p_new
 
 
-def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sat, p_const,
-                       budget: IntegrityBudget, max_order: int = 1,
-                       fault_modes: str | FaultModeRule = DEFAULT_RULE,
-                       iterations: int = PL_ITERATIONS, exclusion: bool = False):
+def _bank_setup(shape, sources: BankSources, options: BankOptions):
+    """(rule, max_order, constellation, p_sat (E, L), p_const, K) of a bank over ``shape`` =
+    (E, L) epochs and sources."""
+    rule = fault_mode_rule(options.fault_modes)
+    max_order = check_order(rule, options.max_order)
+    E, L = shape
+    p_const = jnp.asarray(sources.p_const, jnp.float64)
+    K = n_bank_filters(L, p_const.shape[-1], max_order, rule)
+    p_sat = jnp.broadcast_to(jnp.asarray(sources.p_sat, jnp.float64), (E, L))
+    return rule, max_order, jnp.asarray(sources.constellation), p_sat, p_const, K
+
+
+def run_linear_monitor(x0, p0, model: LinearModel, z, valid, sources: BankSources,
+                       options: BankOptions):
     """The filter bank on a linear model over E epochs (one ``lax.scan``).
 
     ``x0`` (n,), ``p0`` (n, n): the common prior of every filter; ``z``, ``valid`` (E, L);
-    ``constellation`` (L,) int labels 0..C-1; ``p_sat`` (E, L) or (L,) per-epoch priors;
-    ``p_const`` (C,); ``max_order`` static. Per epoch: predict every filter
-    (x <- Phi x, P <- Phi P Phi^T + Q), update filter i with its used sources
-    (``linear_update``), then ``separation_monitor``; ``exclusion`` (static) then
+    ``sources`` (``BankSources``: labels, P_s (E, L) or (L,), P_const (C,)); ``options``
+    (``BankOptions``, static; its ``linearisation`` is not used). Per epoch: predict every
+    filter (x <- Phi x, P <- Phi P Phi^T + Q), update filter i with its used sources
+    (``linear_update``), then ``separation_monitor``; ``options.exclusion`` then
     ``exclusion_restart`` (the excluded sources are not valid afterwards). Returns (final
     (x (K, n), P (K, n, n)), ``FilterMonitorEpoch`` stacked over epochs)."""
-    rule = fault_mode_rule(fault_modes)
-    max_order = check_order(rule, max_order)
+    budget, iterations, exclusion = options.budget, options.iterations, options.exclusion
+    rule, max_order, constellation, p_sat, p_const, K = _bank_setup(z.shape, sources, options)
     E, L = z.shape
-    K = n_bank_filters(L, p_const.shape[-1], max_order, rule)
-    p_sat = jnp.broadcast_to(jnp.asarray(p_sat, jnp.float64), (E, L))
-    constellation = jnp.asarray(constellation)
-    p_const = jnp.asarray(p_const, jnp.float64)
     xs = jnp.broadcast_to(jnp.asarray(x0, jnp.float64), (K,) + x0.shape)
     ps = jnp.broadcast_to(jnp.asarray(p0, jnp.float64), (K,) + p0.shape)
 
@@ -290,39 +335,86 @@ def run_linear_monitor(x0, p0, model: LinearModel, z, valid, constellation, p_sa
 # The seed 000 LTE + IMU error-state EKF
 
 
-def ekf_bank_step(states: _ekf.EkfState, gyro, accel, z, used, tx_pos, tx_clk_m, sigma_m,
-                  params: _ekf.EkfParams):
+def _offsets(states: _ekf.EkfState):
+    """delta_i (K, 17): each filter's nominal state minus filter 0's in the error-state
+    coordinates (attitude: theta with q_i = dq(theta) (x) q_0, the others additive)."""
+    th = jax.vmap(_ekf.attitude_error, (0, None))(states.q, states.q[0])
+    return jnp.concatenate([th, states.r - states.r[0], states.v - states.v[0],
+                            states.bg - states.bg[0], states.ba - states.ba[0],
+                            states.clk - states.clk[0]], axis=-1)
+
+
+def _about(main: _ekf.EkfState, delta, p) -> _ekf.EkfState:
+    """The bank (K leading) whose filter i is ``main`` with the offset ``delta`` (K, 17) injected
+    and covariance ``p`` (K, 17, 17); filter 0 is ``main`` itself, bit for bit."""
+    q = _ekf.quat_multiply(_ekf.error_quat(delta[:, _ekf.TH]), main.q[None])
+    q = q / jnp.linalg.norm(q, axis=-1, keepdims=True)
+    bank = _ekf.EkfState(q, main.r + delta[:, _ekf.POS], main.v + delta[:, _ekf.VEL],
+                         main.bg + delta[:, _ekf.BG], main.ba + delta[:, _ekf.BA],
+                         main.clk + delta[:, _ekf.CLK], p)
+    return jax.tree.map(lambda b, m: b.at[0].set(m), bank, main)
+
+
+def _bank_step_main(states: _ekf.EkfState, inputs: _ekf.EkfInputs, used, tx_pos, params):
+    """Every sub-filter an error-state filter about the main filter's trajectory (module
+    docstring of ``LINEARISATIONS``): the main filter is the seed 000 EKF (``ekf_step``'s
+    operations); sub-filter i carries its offset delta_i from the main nominal state, predicted
+    with the main interval's Phi (delta_i <- Phi delta_i, P_i <- Phi P_i Phi^T + Q_d) and
+    updated with the main filter's innovations nu = z - h(x_0) and rows H:
+    delta_i <- delta_i + K_i (nu - H delta_i); the main's correction dx_0 then moves the
+    reference, delta_i <- delta_i - dx_0."""
+    main = jax.tree.map(lambda a: a[0], states)
+    delta = _offsets(states)
+    main, phi, qd = _ekf.ekf_propagate(main, inputs.gyro, inputs.accel, params)
+    delta = delta @ phi.T
+    p = phi @ states.P @ phi.T + qd
+    p = 0.5 * (p + jnp.swapaxes(p, -1, -2))
+    z_hat, u = _ekf.pseudorange_model(main.r, main.clk, tx_pos, inputs.tx_clk_m)
+    r_var = jnp.broadcast_to(jnp.asarray(inputs.sigma_m, jnp.float64) ** 2, z_hat.shape)
+    nu = inputs.z - z_hat
+    dx0, p0, _ = _ekf.error_state_update(main.P, nu, u, r_var, used[0])
+    main = _ekf.inject(main, dx0, p0)
+    nu_i = nu[None] - (delta[:, _ekf.POS] @ u.T + delta[:, 15:16])
+    dx, p, _ = jax.vmap(_ekf.error_state_update, in_axes=(0, 0, None, None, 0))(
+        p, nu_i, u, r_var, used)
+    return _about(main, delta + dx - dx0[None], p)
+
+
+def ekf_bank_step(states: _ekf.EkfState, inputs: _ekf.EkfInputs, used, tx_pos, params,
+                  linearisation: str = "main"):
     """Predict and update every EKF of the bank (leading axis K of ``states`` and ``used``
-    (K, L)): each a full seed 000 EKF (``araim.ekf.ekf_step``) with its own nominal state,
-    linearized at its own estimate. Returns the new states."""
+    (K, L); ``inputs`` one epoch's ``araim.ekf.EkfInputs``, its ``valid`` not read: ``used``
+    says what each filter uses; ``tx_pos`` (L, 3); ``params`` ``araim.ekf.EkfParams``).
+    Filter 0, the main one, is the seed 000 EKF (``araim.ekf.ekf_step``) either way;
+    ``linearisation`` (``LINEARISATIONS``, static) 'main': the sub-filters are error-state
+    filters about the main filter's trajectory (``_bank_step_main``); 'own': each a full EKF
+    with its own nominal state, linearised at its own estimate. Returns the new states."""
+    _check_linearisation(linearisation)
+    if linearisation == "main":
+        return _bank_step_main(states, inputs, used, tx_pos, params)
 
     def one(st, u):
-        st, _ = _ekf.ekf_step(st, gyro, accel, z, u, tx_pos, tx_clk_m, sigma_m, params)
+        st, _ = _ekf.ekf_step(st, inputs._replace(valid=u), tx_pos, params)
         return st
 
     return jax.vmap(one)(states, used)
 
 
-def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk_m, sigma_m,
-                    params: _ekf.EkfParams, constellation, p_sat, p_const,
-                    budget: IntegrityBudget, max_order: int = 1,
-                    fault_modes: str | FaultModeRule = DEFAULT_RULE,
-                    iterations: int = PL_ITERATIONS, exclusion: bool = False):
-    """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); inputs as
-    ``araim.ekf.run_ekf`` (``gyro``, ``accel`` (E, n, 3); ``z``, ``valid``, ``tx_clk_m`` (E, L);
-    ``tx_pos`` (L, 3); ``sigma_m`` scalar, (L,) or (E, L)) plus the towers' operator labels
-    ``constellation`` (L,), their priors ``p_sat`` (L,) or (E, L) and ``p_const`` (C,). Every
-    filter starts from ``state0``; ``exclusion`` (static): ``exclusion_restart``. Returns
-    (final bank states, ``FilterMonitorEpoch`` stacked over epochs); the position is ENU in
-    the filter's frame G."""
-    rule = fault_mode_rule(fault_modes)
-    max_order = check_order(rule, max_order)
+def run_ekf_monitor(state0: _ekf.EkfState, inputs: _ekf.EkfInputs, tx_pos,
+                    params: _ekf.EkfParams, sources: BankSources, options: BankOptions):
+    """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); ``inputs``
+    (``araim.ekf.EkfInputs`` stacked over E epochs: ``gyro``, ``accel`` (E, n, 3); ``z``,
+    ``valid``, ``tx_clk_m`` (E, L); ``sigma_m`` scalar, (L,) or (E, L)), ``tx_pos`` (L, 3), the
+    towers' operator labels and priors ``sources`` (``BankSources``), ``options``
+    (``BankOptions``, static: budget, order, convention, exclusion by restart, linearisation).
+    Every filter starts from ``state0``. Returns (final bank states, ``FilterMonitorEpoch``
+    stacked over epochs); the position is ENU in the filter's frame G."""
+    budget, iterations, exclusion = options.budget, options.iterations, options.exclusion
+    _check_linearisation(options.linearisation)
+    z = inputs.z
+    rule, max_order, constellation, p_sat, p_const, K = _bank_setup(z.shape, sources, options)
     E, L = z.shape
-    K = n_bank_filters(L, p_const.shape[-1], max_order, rule)
-    p_sat = jnp.broadcast_to(jnp.asarray(p_sat, jnp.float64), (E, L))
-    constellation = jnp.asarray(constellation)
-    p_const = jnp.asarray(p_const, jnp.float64)
-    sigma = jnp.broadcast_to(jnp.asarray(sigma_m, jnp.float64), (E, L))
+    sigma = jnp.broadcast_to(jnp.asarray(inputs.sigma_m, jnp.float64), (E, L))
     bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), state0)
 
     def body(carry, inp):
@@ -330,11 +422,13 @@ def run_ekf_monitor(state0: _ekf.EkfState, gyro, accel, z, valid, tx_pos, tx_clk
         g, a, zz, vv, tc, ps_e, sg = inp
         fm, used = epoch_modes_and_used(vv & ~gone, constellation, ps_e, p_const, budget, rule,
                                         max_order)
-        bank = ekf_bank_step(bank, g, a, zz, used, tx_pos, tc, sg, params)
+        bank = ekf_bank_step(bank, _ekf.EkfInputs(g, a, zz, vv, tc, sg), used, tx_pos, params,
+                             options.linearisation)
         out = separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, budget, iterations)
         bank, gone, out = exclusion_restart(bank, out, fm, gone, exclusion)
         return (bank, gone), out
 
     (bank, _), out = jax.lax.scan(body, (bank0, jnp.zeros(L, bool)), (
-        gyro, accel, z, jnp.asarray(valid, bool), tx_clk_m, p_sat, sigma))
+        inputs.gyro, inputs.accel, z, jnp.asarray(inputs.valid, bool), inputs.tx_clk_m, p_sat,
+        sigma))
     return bank, out

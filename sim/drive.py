@@ -15,7 +15,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from oaraim.araim import RaimConfig
+from oaraim.araim import RaimConfig, RaimOptions
 from oaraim.araim import ekf as _ekf
 from oaraim.araim.ekf_raim import (
     InitialUncertainty,
@@ -227,8 +227,9 @@ def simulate_drive(key, setup: DriveSetup, err: ErrorModel | None = None, filter
 
         def one_filter(cf, excl):
             prior, phi = _ekf.ekf_predict(cf.state, m.gyro_rad_s, m.accel_m_s2, p)
-            cf, out = raim_update(cf, prior, phi, m.pseudorange_m, valid, setup.towers, tclk,
-                                  sigma_f, setup.tables, dof_offset, excl, hal_m)
+            cf, out = raim_update(cf, prior, phi, _ekf.EkfInputs(
+                m.gyro_rad_s, m.accel_m_s2, m.pseudorange_m, valid, tclk, sigma_f),
+                setup.towers, RaimOptions(setup.tables, dof_offset, excl, hal_m))
             err2d = jnp.linalg.norm(cf.state.r[:2] - pos_e[:2])
             return cf, (err2d, out)
 

@@ -33,16 +33,21 @@ from oaraim.sim.faults import FaultScenario, fault_profile_m
 from oaraim.sim.measurement import EpochTowers, EpochTruth, drive_epoch
 
 __all__ = ["DEFAULT_CONFIG", "MONITORS", "FilterDriveConfig", "FilterDriveSummary",
-           "FilterDriveTrace", "gm_overbound_variance", "simulate_filter_drive"]
+           "FilterDriveTrace", "SEPARATION_SIGMAS", "gm_overbound_variance",
+           "simulate_filter_drive"]
 
 #: the monitors compared, in the order of the summary's last axis
 MONITORS = ("filter_ss", "ekf_xi_slope", "snapshot_mhss")
+#: the k of ``FilterDriveSummary.n_sep_over`` (|Delta| > k sigma_ss)
+SEPARATION_SIGMAS = (3.0, 4.0, 5.0)
 
 
 class FilterDriveConfig(NamedTuple):
     """The integrity settings (static: hashable). ``p_sat`` per tower and ``p_const`` for the
     towers' one operator are per-epoch priors; ``budget`` the integrity and false-alert
-    allocation; ``gm_inflation`` 1 adds the GM overbound to the filters' variance (0: no)."""
+    allocation; ``gm_inflation`` 1 adds the GM overbound to the filters' variance (0: no);
+    ``linearisation`` how the bank's sub-filters are linearised
+    (``araim.filter_monitor.LINEARISATIONS``)."""
 
     budget: araim.IntegrityBudget = araim.BUDGET_SEED004_TABLE_I
     p_sat: float = 1e-5
@@ -51,6 +56,7 @@ class FilterDriveConfig(NamedTuple):
     max_order: int = 1
     hal_m: float = 30.0
     gm_inflation: float = 0.0
+    linearisation: str = "main"
 
 
 #: the settings of ``simulate_filter_drive`` by default
@@ -79,6 +85,12 @@ class FilterDriveSummary(NamedTuple):
     n_finite: jax.Array
     hpe_max_m: jax.Array
     """(3,) largest HPE over the at-risk epochs."""
+    n_sep_tests: jax.Array
+    """() separation tests (monitored mode and direction with sigma_ss > 0) at epochs without a
+    fault: the samples of the normalized separation Delta / sigma_ss."""
+    n_sep_over: jax.Array
+    """(3,) of those, |Delta| > k sigma_ss for k = ``SEPARATION_SIGMAS`` (3, 4, 5): the tails of
+    the normalized separation, 2 Q(k) if P_i - P_0 is its covariance."""
 
 
 class FilterDriveTrace(NamedTuple):
@@ -146,13 +158,14 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         # the solution-separation bank
         fm, used = araim.filter_monitor.epoch_modes_and_used(valid, con, p_sat, p_const,
                                                              cfg.budget, rule, cfg.max_order)
-        bank = araim.filter_monitor.ekf_bank_step(bank, m.gyro_rad_s, m.accel_m_s2, z, used,
-                                                  setup.towers, tclk, sig_f, p)
+        bank = araim.filter_monitor.ekf_bank_step(
+            bank, _ekf.EkfInputs(m.gyro_rad_s, m.accel_m_s2, z, valid, tclk, sig_f), used,
+            setup.towers, p, cfg.linearisation)
         ss = araim.separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, cfg.budget)
         # seed 000's NIS + Xi-slope HPL on the same EKF (no exclusion)
         prior, phi = _ekf.ekf_predict(xi.state, m.gyro_rad_s, m.accel_m_s2, p)
-        xi, ro = raim_update(xi, prior, phi, z, valid, setup.towers, tclk, sig_f,
-                             setup.tables, 0, False, cfg.hal_m)
+        xi, ro = raim_update(xi, prior, phi, _ekf.EkfInputs(None, None, z, valid, tclk, sig_f),
+                             setup.towers, araim.RaimOptions(setup.tables, 0, False, cfg.hal_m))
         # the snapshot MHSS of this epoch, linearised at the main filter's estimate
         z_hat, u = _ekf.pseudorange_model(bank.r[0], bank.clk[0], setup.towers, tclk)
         src = araim.Sources(u, con, jnp.full(n_t, var_f), jnp.full(n_t, var_f),
@@ -168,13 +181,18 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         thr = ss.threshold_m
         ratio = jnp.max(jnp.where(thr > 0, jnp.abs(ss.separation_m) / jnp.where(thr > 0, thr, 1.0),
                                   0.0), axis=1)
+        sss = ss.sigma_ss_m
+        zabs = jnp.where(sss > 0, jnp.abs(ss.separation_m) / jnp.where(sss > 0, sss, 1.0), 0.0)
+        tests = ss.monitored[:, None] & (sss > 0)
+        n_over = jnp.stack([jnp.sum(tests & (zabs > k)) for k in SEPARATION_SIGMAS])
         return (world, bank, xi), (hpe, hpl, alert, bias[jnp.clip(fault.source, 0)], ss.status,
-                                   ss.test_ratio, jnp.argmax(ratio))
+                                   ss.test_ratio, jnp.argmax(ratio), jnp.sum(tests), n_over)
 
     n_ep = setup.t_s.shape[0]
     xs = (jnp.arange(n_ep), setup.gyro, setup.accel, setup.t_s, setup.pos[1:n_ep + 1],
           setup.tower_clk_m)
-    _, (hpe, hpl, alert, fb, st, tr, wm) = jax.lax.scan(body, (d.world, bank0, xi0), xs)
+    _, (hpe, hpl, alert, fb, st, tr, wm, n_tests, n_over) = jax.lax.scan(
+        body, (d.world, bank0, xi0), xs)
     t = setup.t_s[:, None]
     risk = t >= jnp.where(fault.source >= 0, fault.onset_s, -jnp.inf)
     faulted = risk & (fault.source >= 0)
@@ -188,7 +206,9 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         detection_delay_s=jnp.where(fault.source >= 0, first - fault.onset_s, jnp.inf),
         n_available=jnp.sum((hpl <= cfg.hal_m) & risk, 0),
         hpl_sum_m=jnp.sum(jnp.where(fin & risk, hpl, 0.0), 0), n_finite=jnp.sum(fin & risk, 0),
-        hpe_max_m=jnp.max(jnp.where(risk, hpe, 0.0), 0))
+        hpe_max_m=jnp.max(jnp.where(risk, hpe, 0.0), 0),
+        n_sep_tests=jnp.sum(jnp.where(faulted[:, 0], 0, n_tests)),
+        n_sep_over=jnp.sum(jnp.where(faulted[:, :1], 0, n_over), 0))
     if traces:
         return summary, FilterDriveTrace(setup.t_s, hpe, hpl, alert, fb, st, tr, wm)
     return summary

@@ -29,6 +29,14 @@ fails where the interval's lower end lies above the allocation. ``sigma_scale`` 
 every filter believe its pseudoranges better than they are: the check must then fail (the
 committed quick run and tests/test_filter_integrity.py show it does).
 
+The seed 004 UAV flight (``uav=yes``, the default) runs the same three scenarios on the flight's
+geometry (``studies/seed004_uav/filter_mc.py``: GPS + 11 SOPs of 3 operators, ``grouped`` modes
+at the order the snapshot MHSS needs, a linear constant-velocity bank of 87 filters told the
+truth: the vehicle's deviation from the flight path follows the bank's own model, white noise
+of the model's variances); the fault hits a source in view the whole flight. Its allocation
+for a fault is PHMI_H / P_s^SOP (1e-4: the stricter of GPS and SOP). The UAV has no IMU and no
+Xi-slope HPL here: the bank alone.
+
 Choices (the seeds give none): P_s = 1e-5 per tower and epoch, P_const = 1e-8 for the operator
 (below P_THRES: the operator mode is left in P_NM, as a common operator bias goes into the
 receiver clock), seed 004 Table I budget, HAL 30 m (seed 001), the clean world by default
@@ -36,7 +44,7 @@ receiver clock), seed 004 Table I budget, HAL 30 m (seed 001), the clean world b
 realistic`` adds the Gauss-Markov multipath and tower clocks of ``sim.ErrorModel`` and
 ``gm_overbound=yes`` inflates the filters' variance by the GM long-run overbound.
 Not done: importance sampling over fault size and onset for the small probabilities (the
-fault-free ~1e-7 is not resolved), the seed 004 UAV geometry, exclusion.
+fault-free ~1e-7 is not resolved), exclusion.
 """
 
 import functools
@@ -45,6 +53,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+from scipy import special
 
 from oaraim import araim, errors, mc, sim
 from oaraim.studies.base import (
@@ -56,6 +65,7 @@ from oaraim.studies.base import (
     positive,
     probability,
 )
+from oaraim.studies.common.seed004 import NAV, NAV_FILE
 
 #: runs per call of the vmapped kernel: one compiled shape whatever the realization count
 MC_BATCH = 16
@@ -67,6 +77,8 @@ MONITOR_LABELS = {"filter_ss": "filter solution separation", "ekf_xi_slope": "EK
 ONSET_WINDOW = (0.1, 0.6)
 #: cells of the fault draws (mc.realization_keys): one per scenario, apart from the runs'
 FAULT_CELL = 100
+#: cells of the UAV flight's runs and of their fault draws
+UAV_CELL, UAV_FAULT_CELL = 200, 300
 
 
 def _range(name, v):
@@ -94,6 +106,20 @@ def _kernel(cfg):
 
 
 @functools.cache
+def _uav_setup(n_epochs, nav):
+    from oaraim.studies.seed004_uav import filter_mc
+    return filter_mc.uav_setup(n_epochs, nav)
+
+
+@functools.cache
+def _uav_kernel(n_epochs, nav):
+    """The jitted vmapped UAV run on the flight of ``_uav_setup`` (static)."""
+    from oaraim.studies.seed004_uav import filter_mc
+    st = _uav_setup(n_epochs, nav)
+    return jax.jit(jax.vmap(lambda k, f: filter_mc.uav_run(k, st, f)))
+
+
+@functools.cache
 def _trace_kernel(cfg):
     def f(key, fault, setup, err, sigma_f):
         return sim.simulate_filter_drive(key, setup, err, fault, cfg, filter_sigma_pr_m=sigma_f,
@@ -106,9 +132,12 @@ class FilterIntegrity(Study):
 
     name = "filter-integrity"
     title = ("Measured integrity risk of a filter's PLs: solution-separation filter bank vs "
-             "Xi-slope HPL vs snapshot MHSS, seed 000 drive, steps and ramps")
+             "Xi-slope HPL vs snapshot MHSS, seed 000 drive and seed 004 UAV flight, steps "
+             "and ramps")
     seed_file = "000_da291ac15380f45f.txt"
-    realization = "one run of the seed 000 drive per fault scenario (fault-free, step, ramp)"
+    realization = ("one run of the seed 000 drive and one of the seed 004 UAV flight per fault "
+                   "scenario (fault-free, step, ramp)")
+    nav_file = NAV_FILE
     default_realizations = 160
     quick_realizations = 16
     quick_sets = {"duration_s": 60.0}
@@ -138,6 +167,16 @@ class FilterIntegrity(Study):
         "fault_modes": Param("add-v4.2", parse_choice(*araim.FAULT_MODE_CONVENTIONS),
                              "fault-mode convention of the bank and the snapshot"),
         "hal_m": Param(30.0, positive, "horizontal alert limit (seed 001)", "m"),
+        "uav": Param("yes", parse_choice("yes", "no"),
+                     "also the seed 004 UAV flight (GPS + 11 SOPs, grouped modes, a linear "
+                     "constant-velocity bank: studies/seed004_uav/filter_mc.py)"),
+        "uav_epochs": Param(240, in_range(10, 100000), "epochs over the 220 s UAV flight "
+                            "(240: 1.1 Hz)"),
+        "nav": NAV,
+        "linearisation": Param("main", parse_choice(*araim.filter_monitor.LINEARISATIONS),
+                               "the EKF bank's sub-filters: error-state filters about the main "
+                               "filter (main) or each a full EKF about its own estimate (own, "
+                               "the earlier bank: false alerts, docs/filter-integrity.md)"),
     }
 
     def run(self, params, realizations, seed, progress):
@@ -147,7 +186,8 @@ class FilterIntegrity(Study):
         cfg = sim.FilterDriveConfig(budget=budget, p_sat=p["p_s"], p_const=p["p_const"],
                                     fault_modes=p["fault_modes"], max_order=1,
                                     hal_m=p["hal_m"],
-                                    gm_inflation=1.0 if p["gm_overbound"] == "yes" else 0.0)
+                                    gm_inflation=1.0 if p["gm_overbound"] == "yes" else 0.0,
+                                    linearisation=p["linearisation"])
         setup = sim.drive_setup(sim.drive_seed000(),
                                 duration_s=p["duration_s"] if p["duration_s"] > 0 else None)
         t_end = float(setup.t_s[-1])
@@ -184,16 +224,127 @@ class FilterIntegrity(Study):
         faults = {s: np.concatenate(drawn[s]) for s in SCENARIOS}
         ds = self._dataset(res, faults, traces, realizations, p, budget)
         rows, metrics = self._summary(res, faults, p, budget, realizations, t_end)
+        if p["uav"] == "yes":
+            uav_vars, uav_rows, uav_metrics = self._uav(p, realizations, seed, budget, progress)
+            ds = ds.assign(uav_vars)
+            check = rows.pop()
+            rows.extend(uav_rows)
+            rows.append(check)
+            metrics["uav"] = uav_metrics
+            passed = metrics["integrity_check"]["passed"] and uav_metrics["passed"]
+            metrics["integrity_check"]["passed"] = bool(passed)
+            check["reproduced"] = float(passed)
         ds.attrs["check_passed"] = int(metrics["integrity_check"]["passed"])
         return StudyResult(ds, rows, metrics)
 
     @staticmethod
-    def _faults(scen, seed, si, start, n_t, onset, p):
-        """MC_BATCH fault scenarios of runs start.., one key per run (cell FAULT_CELL + si)."""
+    def _uav(p, n, seed, budget, progress):
+        """The three scenarios on the seed 004 UAV flight (``filter_mc.uav_run``): the fault on a
+        source in view the whole flight (uniform), onset and size as the drive's. Returns
+        (dataset variables, rows, metrics)."""
+        n_ep = int(p["uav_epochs"])
+        st = _uav_setup(n_ep, p["nav"])
+        fn = _uav_kernel(n_ep, p["nav"])
+        t = st.t_s
+        onset = (ONSET_WINDOW[0] * t[-1], ONSET_WINDOW[1] * t[-1])
+        cand = np.flatnonzero(st.faultable)
+        hal = p["hal_m"]
+        names = ("n_at_risk", "n_misleading", "n_exceed", "n_false_alerts", "n_free",
+                 "n_available", "hpl_sum_m", "n_finite", "delay_s", "source")
+        out = {s: {k: [] for k in names} for s in SCENARIOS}
+        trace = {}
+        for si, scen in enumerate(SCENARIOS):
+            for start in range(0, n, MC_BATCH):
+                m = min(MC_BATCH, n - start)
+                keys = mc.realization_keys(seed, UAV_CELL + si, start, MC_BATCH)
+                f = FilterIntegrity._faults(scen, seed, si, start, cand.size, onset, p,
+                                            UAV_FAULT_CELL)
+                f = f._replace(source=jnp.where(f.source >= 0, jnp.asarray(cand)[
+                    jnp.clip(f.source, 0)], -1))
+                hpe, hpl, alert, bias = (np.asarray(x)[:m] for x in fn(keys, f))
+                src = np.asarray(f.source)[:m]
+                on = np.asarray(f.onset_s)[:m]
+                risk = t[None] >= np.where(src >= 0, on, -np.inf)[:, None]
+                faulted = risk & (src >= 0)[:, None]
+                exceed = hpe > hpl
+                fin = np.isfinite(hpl)
+                first = np.min(np.where(alert & risk, t[None], np.inf), axis=1)
+                o = out[scen]
+                o["n_at_risk"].append(risk.sum(1))
+                o["n_misleading"].append((exceed & ~alert & risk).sum(1))
+                o["n_exceed"].append((exceed & risk).sum(1))
+                o["n_false_alerts"].append((alert & ~faulted).sum(1))
+                o["n_free"].append((~faulted).sum(1))
+                o["n_available"].append(((hpl <= hal) & risk).sum(1))
+                o["hpl_sum_m"].append(np.where(fin & risk, hpl, 0.0).sum(1))
+                o["n_finite"].append((fin & risk).sum(1))
+                o["delay_s"].append(np.where(src >= 0, first - np.where(src >= 0, on, 0.0),
+                                             np.inf))
+                o["source"].append(src)
+                if start == 0:
+                    trace[scen] = (hpe[0], hpl[0], alert[0],
+                                   bias[0, :, max(int(src[0]), 0)] if src[0] >= 0
+                                   else np.zeros_like(t))
+                if progress is not None:
+                    progress.advance(0)
+        res = {s: {k: np.concatenate(v) for k, v in out[s].items()} for s in SCENARIOS}
+        rows, per, passed = [], {}, True
+        p_s_max = float(np.max(st.p_s[cand]))
+        for scen in SCENARIOS:
+            r = res[scen]
+            alloc = budget.phmi_h if scen == "fault-free" else budget.phmi_h / p_s_max
+            k, nn = int(r["n_misleading"].sum()), int(r["n_at_risk"].sum())
+            rate = mc.rate_with_interval(k, nn)
+            fails = rate["ci_low"] > alloc
+            passed = passed and not fails
+            verdict = "exceeds the allocation" if fails else (
+                "within the allocation" if rate["ci_high"] <= alloc else
+                "not resolved (bound above the allocation)")
+            fa = mc.rate_with_interval(int(r["n_false_alerts"].sum()), int(r["n_free"].sum()))
+            mean_hpl = float(r["hpl_sum_m"].sum() / max(r["n_finite"].sum(), 1))
+            avail = 100.0 * float(r["n_available"].sum()) / max(nn, 1)
+            d = r["delay_s"]
+            per[scen] = {"hmi_per_epoch": rate, "allocation": alloc, "verdict": verdict,
+                         "hpe_gt_hpl": mc.rate_with_interval(int(r["n_exceed"].sum()), nn),
+                         "false_alerts": fa, "mean_hpl_m": mean_hpl, "availability_pct": avail,
+                         "detected_runs_pct": (100.0 * float(np.mean(np.isfinite(d)))
+                                               if scen != "fault-free" else None),
+                         "median_detection_delay_s": (float(np.median(d))
+                                                      if scen != "fault-free" else None)}
+            det = ("" if scen == "fault-free" else
+                   f"; detected in {per[scen]['detected_runs_pct']:.3g} % of runs, median "
+                   f"delay {per[scen]['median_detection_delay_s']:.3g} s")
+            rows.append({
+                "quantity": f"P(HMI) per at-risk epoch, {scen}, UAV flight (seed 004), filter "
+                            "solution separation", "unit": "-", "published": None,
+                "reproduced": rate["rate"],
+                "note": f"{k} of {nn} epochs, 95 % CI [{rate['ci_low']:.2g}, "
+                        f"{rate['ci_high']:.2g}], allocation {alloc:.2g}"
+                        f"{'' if scen == 'fault-free' else ' (PHMI_H / P_s of a SOP)'}: "
+                        f"{verdict}; mean HPL {mean_hpl:.3g} m, available at HAL {hal:g} m "
+                        f"{avail:.3g} %; alerts without a fault {fa['count']} of "
+                        f"{fa['trials']} epochs{det}"})
+        v = {f"uav_{k}": (("scenario", "run"), np.stack([res[s][k] for s in SCENARIOS]))
+             for k in names}
+        for i, k in enumerate(("hpe_m", "hpl_m", "alert", "fault_m")):
+            v[f"uav_trace_{k}"] = (("scenario", "uav_epoch"),
+                                   np.stack([trace[s][i] for s in SCENARIOS]))
+        v["uav_trace_t_s"] = ("uav_epoch", t)
+        v["uav_source_id"] = ("uav_source", st.ids)
+        metrics = {"scenarios": per, "passed": bool(passed), "epochs": n_ep,
+                   "filters": int(araim.filter_monitor.n_bank_filters(
+                       st.used.shape[1], st.sources.p_const.size, st.options.max_order,
+                       st.options.fault_modes)),
+                   "max_order": int(st.options.max_order), "faultable_sources": int(cand.size)}
+        return v, rows, metrics
+
+    @staticmethod
+    def _faults(scen, seed, si, start, n_t, onset, p, cell=FAULT_CELL):
+        """MC_BATCH fault scenarios of runs start.., one key per run (cell ``cell`` + si)."""
         if scen == "fault-free":
             nf = sim.no_fault()
             return jax.tree.map(lambda x: jnp.broadcast_to(x, (MC_BATCH,)), nf)
-        keys = mc.realization_keys(seed, FAULT_CELL + si, start, MC_BATCH)
+        keys = mc.realization_keys(seed, cell + si, start, MC_BATCH)
         size = _pair(p["step_m"] if scen == "step" else p["ramp_m_s"])
         draw = jax.vmap(lambda k: jax.tree.map(lambda x: x[0], sim.draw_faults(
             k, 1, n_t, scen, onset, size)))
@@ -204,7 +355,8 @@ class FilterIntegrity(Study):
         v = {}
         for k in res[SCENARIOS[0]]:
             arr = np.stack([res[s][k] for s in SCENARIOS])
-            v[k] = (("scenario", "run", "monitor") if arr.ndim == 3 else ("scenario", "run"), arr)
+            third = "sep_sigma" if k == "n_sep_over" else "monitor"
+            v[k] = (("scenario", "run", third) if arr.ndim == 3 else ("scenario", "run"), arr)
         v["fault"] = (("scenario", "run", "fault_field"),
                       np.stack([faults[s] for s in SCENARIOS]))
         for k in ("hpe_m", "hpl_m", "alert"):
@@ -215,9 +367,11 @@ class FilterIntegrity(Study):
         v["trace_t_s"] = ("epoch", np.asarray(traces[SCENARIOS[0]].t_s))
         return xr.Dataset(v, coords={"scenario": list(SCENARIOS), "run": np.arange(n),
                                      "monitor": list(MONITORS),
+                                     "sep_sigma": list(sim.filter_drive.SEPARATION_SIGMAS),
                                      "fault_field": list(sim.FaultScenario._fields)},
                           attrs={"phmi_h": budget.phmi_h, "p_s": p["p_s"], "hal_m": p["hal_m"],
                                  "realizations": n, "world": p["world"],
+                                 "linearisation": p["linearisation"],
                                  "sigma_scale": p["sigma_scale"]})
 
     @staticmethod
@@ -280,20 +434,41 @@ class FilterIntegrity(Study):
         fa = sum(per[s]["filter_ss"]["false_alerts"] for s in SCENARIOS)
         n_free = sum(per[s]["filter_ss"]["epochs_without_fault"] for s in SCENARIOS)
         fa_rate = mc.rate_with_interval(fa, n_free)
+        fa_alloc = (budget.p_fa_h + budget.p_fa_v) / budget.n_es_cont
+        fa_ok = fa_rate["ci_low"] <= fa_alloc
+        fa_verdict = ("exceeds the allocation" if not fa_ok else (
+            "within the allocation" if fa_rate["ci_high"] <= fa_alloc else
+            "consistent with the allocation (not resolved: bound above it)"))
         rows.append({"quantity": "alerts without a fault per epoch, filter solution separation",
                      "unit": "-", "published": None, "reproduced": fa_rate["rate"],
                      "note": f"{fa} of {n_free} fault-free epochs (all scenarios), 95 % CI "
                              f"[{fa_rate['ci_low']:.2g}, {fa_rate['ci_high']:.2g}] against the "
-                             f"false-alert allocation P_FA_H = {budget.p_fa_h:.2g}: a "
-                             "continuity figure, not part of the integrity check "
-                             "(docs/filter-integrity.md: the EKF bank's linearisation)"})
+                             f"false-alert allocation P_FA_H + P_FA_V = {fa_alloc:.2g}: "
+                             f"{fa_verdict} (sub-filters linearised: {p['linearisation']})"})
+        n_tests = sum(int(res[s]["n_sep_tests"].sum()) for s in SCENARIOS)
+        tails = {}
+        for j, k_sig in enumerate(sim.filter_drive.SEPARATION_SIGMAS):
+            cnt = sum(int(res[s]["n_sep_over"][:, j].sum()) for s in SCENARIOS)
+            t = mc.rate_with_interval(cnt, n_tests)
+            t["gaussian"] = float(2.0 * special.ndtr(-k_sig))
+            tails[f"{k_sig:g}"] = t
+            rows.append({"quantity": f"P(|separation| > {k_sig:g} sigma_ss), fault-free, filter "
+                                     "solution separation", "unit": "-", "published": None,
+                         "reproduced": t["rate"],
+                         "note": f"{cnt} of {n_tests} monitored separation tests (mode x "
+                                 f"direction x epoch), CI [{t['ci_low']:.2g}, "
+                                 f"{t['ci_high']:.2g}] as if independent (they are not: "
+                                 f"correlated in time and across modes); Gaussian with "
+                                 f"covariance P_i - P_0: {t['gaussian']:.2g}"})
         rows.append({"quantity": "integrity check: the filter bank's P(HMI) not above the "
                                  "allocation in any scenario", "unit": "pass", "published": None,
                      "reproduced": float(passed),
                      "note": "1 pass, 0 fail; sigma_scale < 1 (an injected model error) must "
                              "fail it"})
         metrics = {"scenarios": per, "integrity_check": {"passed": bool(passed)},
-                   "filter_ss_false_alerts": fa_rate,
+                   "filter_ss_false_alerts": {**fa_rate, "allocation": fa_alloc,
+                                              "verdict": fa_verdict},
+                   "separation_tails": tails, "linearisation": p["linearisation"],
                    "runs_per_scenario": n, "drive_s": t_end, "world": p["world"],
                    "sigma_scale": p["sigma_scale"], "gm_overbound": p["gm_overbound"],
                    "budget": {"phmi_h": budget.phmi_h, "p_fa_h": budget.p_fa_h,
@@ -403,4 +578,34 @@ class FilterIntegrity(Study):
         files.append(f"{out_dir}/ramp_run.png")
         fig.savefig(files[-1], dpi=120)
         plt.close(fig)
+        if "uav_trace_t_s" in ds:
+            files.append(self._plot_uav(ds, out_dir, plt))
         return files
+
+    @staticmethod
+    def _plot_uav(ds, out_dir, plt):
+        """uav_runs.png: run 0 of the step and ramp scenarios on the UAV flight."""
+        t = ds["uav_trace_t_s"].values
+        fig, axes = plt.subplots(1, 2, figsize=(10.0, 3.8), sharey=True)
+        for ax, scen in zip(axes, ("step", "ramp"), strict=True):
+            si = SCENARIOS.index(scen)
+            ax.plot(t, ds["uav_trace_hpl_m"].values[si], "C0", label="HPL, filter bank")
+            ax.plot(t, ds["uav_trace_hpe_m"].values[si], "C0:", lw=1, label="HPE")
+            ax.plot(t, np.maximum(ds["uav_trace_fault_m"].values[si], 1e-3), "k-", lw=0.8,
+                    label="injected bias (m)")
+            al = ds["uav_trace_alert"].values[si].astype(bool)
+            if al.any():
+                ax.plot(t[al], np.full(al.sum(), 0.15), "|", color="C3", ms=6, label="alert")
+            src = str(ds["uav_source_id"].values[int(ds["uav_source"].values[si, 0])])
+            ax.set_title(f"UAV flight, {scen} run 0 (fault on {src})", fontsize=9)
+            ax.set_yscale("log")
+            ax.set_ylim(0.1, 1e3)
+            ax.set_xlabel("time (s)")
+            ax.grid(alpha=0.3, which="both")
+            ax.legend(fontsize=7, loc="upper left")
+        axes[0].set_ylabel("m")
+        fig.tight_layout()
+        path = f"{out_dir}/uav_runs.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return path

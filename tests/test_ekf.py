@@ -360,8 +360,9 @@ def test_too_few_towers_gives_inf_and_status():
     carry = ekf_raim.raim_init(st, 5)
     valid = jnp.array([True, True, False, False, False])
     tx = jnp.asarray(rng.normal(size=(5, 3)) * 1000)
-    _, out = ekf_raim.raim_update(carry, st, jnp.eye(17), jnp.full(5, 1500.0), valid, tx,
-                                  jnp.zeros(5), 2.0, tab, 4, True, 30.0)
+    inputs = ekf.EkfInputs(None, None, jnp.full(5, 1500.0), valid, jnp.zeros(5), 2.0)
+    _, out = ekf_raim.raim_update(carry, st, jnp.eye(17), inputs, tx,
+                                  ekf_raim.RaimOptions(tab, 4, True, 30.0))
     assert np.isinf(float(out.hpl_m)) and np.isinf(float(out.threshold))
     assert int(out.status) == Status.TOO_FEW_SOURCES and not bool(out.detected)
     assert bool(out.alarm)

@@ -40,7 +40,28 @@ def study_runs():
     for scale in (1.0, 0.2):
         params = study.validate({"duration_s": 20.0, "sigma_scale": scale})
         out[scale] = study.run(params, 16, 0, None)
+    params = study.validate({"duration_s": 20.0, "linearisation": "own"})
+    out["own"] = study.run(params, 16, 0, None)
     return out
+
+
+def test_fault_free_separations_follow_their_claimed_covariance(study_runs):
+    """The false-alert check that can fail. Fault-free, every separation Delta_i,q of the bank
+    should be N(0, (P_i - P_0)_qq); the alert threshold is K_fa ~ 5.7 of its sigma. In 16 runs of
+    20 s (48 runs over the three scenarios' fault-free epochs: ~1e5 monitored tests) a Gaussian
+    exceeds 5 sigma with probability <= 1e5 x 5.7e-7 = 0.06 (union bound), so no test may; and
+    no alert is raised. The bank whose sub-filters linearise about their own estimates (the
+    earlier bank) fails the same check on the same runs: its tower-4 sub-filter's separation
+    reaches 5.4 sigma in the first seconds (docs/filter-integrity.md, the false-alert cause)."""
+    tails = {k: study_runs[k].metrics["separation_tails"] for k in (1.0, "own")}
+    assert tails[1.0]["5"]["trials"] > 50_000
+    assert tails[1.0]["5"]["count"] == 0
+    assert tails["own"]["5"]["count"] > 0
+    fa = study_runs[1.0].metrics["filter_ss_false_alerts"]
+    assert fa["count"] == 0 and fa["verdict"].startswith("consistent")
+    # the bulk matches the Gaussian too: 3 sigma within a factor 2 of 2 Q(3) = 2.7e-3
+    t3 = tails[1.0]["3"]
+    assert 0.5 < t3["rate"] / t3["gaussian"] < 2.0
 
 
 def test_check_passes_at_default_and_fails_with_an_injected_model_error(study_runs):
@@ -50,6 +71,20 @@ def test_check_passes_at_default_and_fails_with_an_injected_model_error(study_ru
     ff = bad.metrics["scenarios"]["fault-free"]["filter_ss"]
     assert ff["verdict"] == "exceeds the allocation"
     assert ff["hmi_per_epoch"]["ci_low"] > 1e-3
+
+
+def test_uav_flight_bank(study_runs):
+    """The seed 004 UAV flight beside the drive (16 runs per scenario, 240 epochs): the bank of
+    the seed004-uav option (grouped modes at order 2: 87 filters for 8 GPS satellites and 11
+    towers of 3 operators), no misleading epoch and no alert without a fault, finite HPLs near
+    the seed004-uav option's 6.7 m, faults detected."""
+    u = study_runs[1.0].metrics["uav"]
+    assert u["filters"] == 87 and u["max_order"] == 2 and u["passed"]
+    for scen in ("fault-free", "step", "ramp"):
+        d = u["scenarios"][scen]
+        assert d["hmi_per_epoch"]["count"] == 0 and d["false_alerts"]["count"] == 0
+        assert 5.0 < d["mean_hpl_m"] < 9.0
+    assert u["scenarios"]["step"]["detected_runs_pct"] > 25.0
 
 
 def test_bank_main_filter_is_the_xi_slope_filter(study_runs):

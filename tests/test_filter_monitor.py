@@ -37,6 +37,8 @@ P_SAT = np.full(L, 1e-5)
 P_CONST = np.array([1e-8, 1e-4])
 CON = np.array([0, 0, 0, 0, 0, 1, 1, 1])
 N_GEOMETRIES = 6
+SOURCES = fmon.BankSources(CON, P_SAT, P_CONST)
+OPTIONS = fmon.BankOptions(BUDGET, 1, RULE)
 
 
 def _rows(rng, shape):
@@ -59,7 +61,8 @@ def _run(h, sig, z, q=0.0, valid=None):
                              jnp.asarray(sig**2))
     valid = np.ones((e, L), bool) if valid is None else valid
     return fmon.run_linear_monitor(jnp.zeros(N), 1e12 * jnp.eye(N), model, jnp.asarray(z),
-                                   jnp.asarray(valid), CON, P_SAT, P_CONST, BUDGET, 1, RULE)[1]
+                                   jnp.asarray(valid), fmon.BankSources(CON, P_SAT, P_CONST),
+                                   OPTIONS)[1]
 
 
 def _case(seed, static, sigma_m=None):
@@ -226,8 +229,8 @@ def test_exclusion_restart_makes_the_fault_free_subfilter_the_main_one():
     model = fmon.LinearModel(jnp.broadcast_to(jnp.eye(N), (e, N, N)), jnp.zeros((e, N, N)),
                              jnp.asarray(h), jnp.asarray(sig**2))
     run = lambda excl: fmon.run_linear_monitor(  # noqa: E731
-        jnp.zeros(N), 1e12 * jnp.eye(N), model, jnp.asarray(z), jnp.ones((e, L), bool), CON,
-        P_SAT, P_CONST, BUDGET, 1, RULE, exclusion=excl)[1]
+        jnp.zeros(N), 1e12 * jnp.eye(N), model, jnp.asarray(z), jnp.ones((e, L), bool),
+        SOURCES, OPTIONS._replace(exclusion=excl))[1]
     out, plain = run(True), run(False)
     first = int(np.argmax(np.asarray(plain.alert)))
     assert bool(plain.alert[first]) and first >= 2
@@ -270,7 +273,7 @@ def test_replay_of_a_recorded_drive_main_filter_is_the_ekf(tmp_path):
     assert np.all(np.isfinite(fr.err_2d_m))
     # exclusion by restart: tower 1 (index 0) out from the first alert on, the error after the
     # onset smaller than the unexcluded bank's (which absorbs the 30 m bias)
-    fx = ekf_replay.replay_filter_monitor(loaded, exclusion=True)
+    fx = ekf_replay.replay_filter_monitor(loaded, ekf_replay.FilterReplayConfig(exclusion=True))
     gone = fx.monitor.excluded_sources
     assert not gone[~after].any() and np.all(gone[-1] == (np.arange(gone.shape[1]) == 0))
     assert fx.err_2d_m[after].mean() < fr.err_2d_m[after].mean() / 2
@@ -294,8 +297,8 @@ def test_gradient_of_the_filter_hpl_matches_finite_differences():
         model = fmon.LinearModel(jnp.broadcast_to(jnp.eye(N), (E, N, N)), jnp.zeros((E, N, N)),
                                  h, jnp.asarray(sig**2))
         return fmon.run_linear_monitor(jnp.zeros(N), 1e12 * jnp.eye(N), model,
-                                       jnp.zeros((E, L)), jnp.ones((E, L), bool), CON, P_SAT,
-                                       P_CONST, BUDGET, 1, RULE)[1].hpl_m[-1]
+                                       jnp.zeros((E, L)), jnp.ones((E, L), bool), SOURCES,
+                                       OPTIONS)[1].hpl_m[-1]
 
     grad = np.asarray(jax.grad(hpl)(jnp.asarray(az)))
     for e, l_ in ((2, 3), (0, 6)):

@@ -168,14 +168,16 @@ CALLS = {
         "ekf_predict": lambda: araim.ekf_predict(state, imu * 0, imu, params),
         "ekf_update": lambda: araim.ekf_update(state, z6, jnp.ones(6, bool), tw, jnp.zeros(6),
                                                1.0),
-        "ekf_step": lambda: araim.ekf_step(state, imu * 0, imu, z6, jnp.ones(6, bool), tw,
-                                           jnp.zeros(6), jnp.ones(6), params),
-        "run_ekf": lambda: araim.run_ekf(state, jnp.zeros((E, n, 3)), jnp.stack([imu] * E),
-                                         jnp.stack([z6] * E), jnp.ones((E, 6), bool), tw,
-                                         jnp.zeros((E, 6)), 1.0, params),
+        "ekf_step": lambda: araim.ekf_step(state, araim.ekf.EkfInputs(
+            imu * 0, imu, z6, jnp.ones(6, bool), jnp.zeros(6), jnp.ones(6)), tw, params),
+        "run_ekf": lambda: araim.run_ekf(state, araim.ekf.EkfInputs(
+            jnp.zeros((E, n, 3)), jnp.stack([imu] * E), jnp.stack([z6] * E),
+            jnp.ones((E, 6), bool), jnp.zeros((E, 6)), 1.0), tw, params),
         "run_ekf_raim": lambda: araim.run_ekf_raim(
-            state, jnp.zeros((E, n, 3)), jnp.stack([imu] * E), jnp.stack([z6] * E),
-            jnp.ones((E, 6), bool), tw, jnp.zeros((E, 6)), 1.0, params, tables),
+            state, araim.ekf.EkfInputs(jnp.zeros((E, n, 3)), jnp.stack([imu] * E),
+                                       jnp.stack([z6] * E), jnp.ones((E, 6), bool),
+                                       jnp.zeros((E, 6)), 1.0), tw, params,
+            araim.ekf_raim.RaimOptions(tables)),
         "replay": replay,
         "replay_metrics": lambda: araim.replay_metrics(replayed["r"]),
     },

@@ -11,6 +11,8 @@ bank: z' = z - h(x_wls) + G x_wls = G x + clock + (second-order terms, below 1 m
 differences at the towers' kilometre ranges). The fault modes, priors and budget are the
 study's (Table I, ``fault_modes``), the PLs come from ``araim.run_linear_monitor``."""
 
+from typing import NamedTuple
+
 import numpy as np
 
 from oaraim import araim, geometry, mc
@@ -43,11 +45,25 @@ def constant_velocity_model(dt_s, g_enu, cons, n_groups, var_m2):
     return araim.LinearModel(phi, q, h, var_m2)
 
 
-def filter_monitor(geom, pr, corr, var_int, use, cons, p_sat, p_const, x0, fault_modes,
-                   max_order, hal_m):
-    """The bank over the flight (GPS + the SOPs of ``use``, the fault-mode order the snapshot
-    MHSS needed for them): per-epoch HPE, HPL and alert of the filter, and the summary (JSON
-    values)."""
+class FlightPseudoranges(NamedTuple):
+    """The flight's pseudoranges as the study holds them (E epochs, L sources): ``pr`` (m),
+    their corrections ``corr`` (m), variances ``var_int`` (m^2) and the sources ``use``d
+    (bool)."""
+
+    pr: np.ndarray
+    corr: np.ndarray
+    var_int: np.ndarray
+    use: np.ndarray
+
+
+def filter_monitor(geom, meas: FlightPseudoranges, sources: araim.filter_monitor.BankSources,
+                   x0, options: araim.filter_monitor.BankOptions, hal_m):
+    """The bank over the flight (GPS + the SOPs of ``meas.use``; ``sources`` the clock-group
+    labels and priors, ``options`` the budget, fault-mode convention and the order the snapshot
+    MHSS needed): per-epoch HPE, HPL and alert of the filter, and the summary (JSON values)."""
+    pr, corr, var_int, use = meas
+    cons, p_sat, p_const = sources
+    max_order = options.max_order
     r = araim.snapshot.replay(pr, geom.tx_pos_m, var_int, var_int, use, geom.truth_m,
                               correction_m=corr, constellation=cons, p_const=p_const, x0_m=x0,
                               config=araim.snapshot.ReplayConfig(monitors=("slope",)))
@@ -70,10 +86,10 @@ def filter_monitor(geom, pr, corr, var_int, use, cons, p_sat, p_const, x0, fault
     model = constant_velocity_model(dt, np.where(used[..., None], g, 0.0), cons, n_c,
                                     np.where(used, var_int, 1.0))
     n = 6 + n_c
-    _, out = araim.run_linear_monitor(np.zeros(n), PRIOR_VAR * np.eye(n), model, z, used, cons,
-                                      np.broadcast_to(p_sat, used.shape), p_const,
-                                      araim.BUDGET_SEED004_TABLE_I, max_order,
-                                      fault_modes)
+    _, out = araim.run_linear_monitor(
+        np.zeros(n), PRIOR_VAR * np.eye(n), model, z, used,
+        araim.filter_monitor.BankSources(cons, np.broadcast_to(p_sat, used.shape), p_const),
+        options)
     hpl = np.asarray(out.hpl_m)
     hpe = np.linalg.norm(np.asarray(out.position_m)[:, :2] - truth_enu[:, :2], axis=1)
     alert = np.asarray(out.alert)

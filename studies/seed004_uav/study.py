@@ -331,9 +331,12 @@ class Seed004Uav(Study):
                            [str(geom.ids[tw_idx[j]]) for j in order], group_names, cons)
         if params["monitor"] == "filter-ss":
             use = geom.valid & (geom.is_gps | np.isin(np.arange(geom.valid.shape[1]), tw_idx))
-            *_, fs = filter_ss.filter_monitor(geom, pr, corr, var_int, use, cons, p_sat,
-                                              p_const, x0, self.fault_modes, orders[-1],
-                                              params["hal_m"])
+            fm = araim.filter_monitor
+            *_, fs = filter_ss.filter_monitor(
+                geom, filter_ss.FlightPseudoranges(pr, corr, var_int, use),
+                fm.BankSources(cons, p_sat, p_const), x0,
+                fm.BankOptions(araim.BUDGET_SEED004_TABLE_I, orders[-1], self.fault_modes),
+                params["hal_m"])
             out.rows.extend(filter_ss.filter_rows(fs, res["hpl"][-1], params["hal_m"]))
             out.metrics["filter_ss"] = fs
         return out
