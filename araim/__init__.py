@@ -29,6 +29,7 @@ from oaraim.araim.epoch import (
     ISM_GPS,
     ISM_SOP,
     EpochLevels,
+    EpochOptions,
     Ism,
     epoch_protection_levels,
 )
@@ -43,6 +44,7 @@ from oaraim.araim.fde import (
     solution_separation,
 )
 from oaraim.araim.mhss import (
+    MHSSOptions,
     MHSSResult,
     Sources,
     protection_levels,
@@ -53,13 +55,14 @@ from oaraim.araim.mhss import (
 from oaraim.araim.position_opt import PositionOptimization
 from oaraim.araim.slopes import SlopeHPL, Slopes, slope_hpl, slope_hpl_kernel, slopes, slopes_kernel
 from oaraim.araim.status import Status
-from oaraim.araim.wnls import WNLSResult, wnls, wnls_kernel
+from oaraim.araim.wnls import WNLSOptions, WNLSResult, wnls, wnls_kernel
 
 __all__ = [
     "BUDGET_LPV200",
     "BUDGET_LPV200_MAAST",
     "BUDGET_SEED004_TABLE_I",
     "EpochLevels",
+    "EpochOptions",
     "FAULT_MODE_CONVENTIONS",
     "FDEResult",
     "ISM_GALILEO",
@@ -68,6 +71,7 @@ __all__ = [
     "Ism",
     "FaultModeRule",
     "IntegrityBudget",
+    "MHSSOptions",
     "MHSSResult",
     "PositionOptimization",
     "Separation",
@@ -86,6 +90,7 @@ __all__ = [
     "SlopeHPL",
     "Slopes",
     "Status",
+    "WNLSOptions",
     "WNLSResult",
     "detection_threshold",
     "lambda_det_table",
@@ -121,11 +126,13 @@ from oaraim.araim.snapshot import (  # noqa: E402
     MonitorReplay,
     ReplayConfig,
     ReplayResult,
+    ReplaySources,
     replay,
     replay_metrics,
 )
 
-__all__ += ["MonitorReplay", "ReplayConfig", "ReplayResult", "replay", "replay_metrics", "snapshot"]
+__all__ += ["MonitorReplay", "ReplayConfig", "ReplayResult", "ReplaySources", "replay",
+            "replay_metrics", "snapshot"]
 
 from oaraim.araim import filter_monitor  # noqa: E402
 from oaraim.araim.filter_monitor import (  # noqa: E402

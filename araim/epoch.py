@@ -30,8 +30,8 @@ from jax.typing import ArrayLike
 from jaxtyping import Real
 
 from oaraim.araim.budget import BUDGET_LPV200, IntegrityBudget
-from oaraim.araim.fault_modes import MAX_EVENT_SOURCES, FaultModeRule, fault_mode_rule
-from oaraim.araim.mhss import MHSSResult, protection_levels
+from oaraim.araim.fault_modes import MAX_EVENT_SOURCES
+from oaraim.araim.mhss import MHSSOptions, MHSSResult, Sources, as_options, protection_levels
 from oaraim.araim.validate import check_range
 from oaraim.errors import AIRBORNE_MODELS, gnss_variances, sop_variances
 from oaraim.geometry import (
@@ -43,7 +43,8 @@ from oaraim.geometry import (
 )
 from oaraim.readers import MIN_SEPARATION_M, first_near_pair
 
-__all__ = ["ISM_GALILEO", "ISM_GPS", "ISM_SOP", "SOURCE_BUCKETS", "EpochLevels", "Ism",
+__all__ = ["ISM_GALILEO", "ISM_GPS", "ISM_SOP", "SOURCE_BUCKETS", "EpochLevels", "EpochOptions",
+           "Ism",
            "epoch_protection_levels"]
 
 
@@ -140,15 +141,34 @@ def _ism(ism, key, default):
     return v
 
 
+class EpochOptions(NamedTuple):
+    """How ``epoch_protection_levels`` models its receiver: the mask, the ISM, the user error
+    model, the constellations read from the sky and the MHSS options."""
+
+    mask_deg: float = 5.0
+    """Elevation mask of the satellites (deg); towers have none."""
+    ism: dict | None = None
+    """``{"gps": Ism, "galileo": Ism, "sop": Ism}``, each optional (defaults ``ISM_GPS``,
+    ``ISM_GALILEO``, ``ISM_SOP``; ``"sop"`` applies to every carrier, or name a carrier
+    ``"sop:A"``)."""
+    airborne_model: str = "ed259a"
+    """The GNSS user error model of ``error_models.AIRBORNE_MODELS`` (``'ed259a'``, MAAST for
+    ARAIM 2; ``'add'`` the ADD's curve)."""
+    constellations: Sequence[str] = ("gps", "galileo")
+    """The constellations of ``sky`` used."""
+    allow_gaps: bool = False
+    """Keep epochs the navigation file does not cover (they count as unavailable: few or no
+    satellites) instead of refusing them."""
+    mhss: MHSSOptions = MHSSOptions()
+    """The fault-mode convention and order (None: the smallest at which nothing beyond is
+    monitored, ``protection_levels``) and the other ``MHSSOptions``."""
+
+
 def epoch_protection_levels(lat_deg: float, lon_deg: float, h_m: float,
                             t_gps_s: Real[ArrayLike, " T"] | Real[ArrayLike, ""],
                             sky: Any = "nominal", towers: Sequence | None = None, *,
-                            mask_deg: float = 5.0, budget: IntegrityBudget = BUDGET_LPV200,
-                            fault_modes: str | FaultModeRule | None = None,
-                            ism: dict | None = None, airborne_model: str = "ed259a",
-                            max_order: int | None = None,
-                            constellations: Sequence[str] = ("gps", "galileo"),
-                            allow_gaps: bool = False) -> EpochLevels:
+                            budget: IntegrityBudget = BUDGET_LPV200,
+                            options: EpochOptions | None = None) -> EpochLevels:
     """The MHSS protection levels of a receiver at ``(lat_deg, lon_deg, h_m)`` (WGS-84) at
     GPS time(s) ``t_gps_s`` (a number or (T,) array; ``geometry.gpstime``), with the
     satellites of ``sky`` at or above ``mask_deg`` and the ``towers`` given.
@@ -159,21 +179,18 @@ def epoch_protection_levels(lat_deg: float, lon_deg: float, h_m: float,
       towers: rows ``(lat_deg, lon_deg, height_m, carrier)``; every tower is used (SOPs have
         no elevation mask), one SOP constellation per carrier.
       budget: an ``IntegrityBudget`` (default LPV-200).
-      fault_modes: a convention name or ``FaultModeRule`` (default the current ADD).
-      ism: ``{"gps": Ism, "galileo": Ism, "sop": Ism}``, each optional (defaults ``ISM_GPS``,
-        ``ISM_GALILEO``, ``ISM_SOP``; ``"sop"`` applies to every carrier, or name a carrier
-        ``"sop:A"``).
-      airborne_model: the GNSS user error model of ``error_models.AIRBORNE_MODELS``
-        (default ``'ed259a'``, MAAST for ARAIM 2; ``'add'`` the ADD's curve).
-      max_order: the fault-mode order (None: the smallest at which nothing beyond is
-        monitored, ``protection_levels``).
-      allow_gaps: keep epochs the navigation file does not cover (they count as unavailable:
-        few or no satellites) instead of refusing them.
+      options: ``EpochOptions`` (None: the defaults): mask, ISM, user error model,
+        constellations, gaps, and the ``MHSSOptions`` (fault modes, order).
 
     Returns:
       ``EpochLevels``. An epoch with too few sources or an unmet budget has infinite PLs and
       its ``Status``, like every receiver function.
     """
+    options = EpochOptions() if options is None else options
+    if not isinstance(options, EpochOptions):
+        raise ValueError("options must be an araim.EpochOptions, got "
+                         f"{type(options).__name__}")
+    mask_deg, ism, airborne_model, constellations, allow_gaps, mhss = options
     lat = check_range("lat_deg", lat_deg, -90.0, 90.0)
     lon = check_range("lon_deg", lon_deg, -180.0, 360.0)
     h = check_range("h_m", h_m, -1000.0, 1e5)
@@ -187,7 +204,7 @@ def epoch_protection_levels(lat_deg: float, lon_deg: float, h_m: float,
     mask = check_range("mask_deg", mask_deg, 0.0, 90.0)
     if mask == 90.0:
         raise ValueError(f"mask_deg must be below 90 (no sky is left above it), got {mask_deg!r}")
-    fault_mode_rule(fault_modes)  # a bad name fails here, before the sky is computed
+    mhss = as_options(mhss).checked()  # a bad name fails here, before the sky is computed
 
     rx = np.asarray(geodetic_to_ecef(np.deg2rad(lat), np.deg2rad(lon), h))
     ecef, usable, _, cons, sv, desc = satellites(sky, t, tuple(constellations))
@@ -255,8 +272,8 @@ def epoch_protection_levels(lat_deg: float, lon_deg: float, h_m: float,
     p_const = np.broadcast_to(np.array([s.p_const for s in ism_of]), (t.size, n_c))
     g = np.asarray(geometry_rows(az_c, np.where(valid, el_c, 0.0)))
     g = np.where(valid[..., None], g, 0.0)
-    pl = protection_levels(g, label, var_int, var_acc, b_nom, p_sat, p_const, budget,
-                           valid, max_order=max_order, fault_modes=fault_modes)
+    pl = protection_levels(Sources(g, label, var_int, var_acc, b_nom, p_sat, valid), p_const,
+                           budget, mhss)
 
     ids = [tuple(sv[order[i, valid[i]]].tolist()) for i in range(t.size)]
     a_deg = [tuple(np.rad2deg(az_c[i, valid[i]]).tolist()) for i in range(t.size)]

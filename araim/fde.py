@@ -21,31 +21,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
-from jaxtyping import Bool, Float, Int, Real
+from jaxtyping import Float, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fault_modes import (
-    DEFAULT_RULE,
-    FaultModeRule,
-    check_order,
-    fault_mode_rule,
-    to_batch_first,
-    to_batch_last,
-)
+from oaraim.araim.fault_modes import DEFAULT_RULE, to_batch_first, to_batch_last
 from oaraim.araim.mhss import (
     PL_ITERATIONS,
+    MHSSOptions,
     MHSSResult,
     Sources,
+    as_options,
     batch_last_inputs,
     check_options,
+    kernel_options,
     pls_from_projection,
     prepare_inputs,
     project,
     required_order,
 )
 from oaraim.araim.status import Status
-from oaraim.araim.validate import batch_source, check_int
+from oaraim.araim.validate import batch_source
 from oaraim.batching import bucket, is_traced, jit_kernel, pad_rows, unpad
 
 
@@ -95,7 +91,8 @@ class FDEResult(NamedTuple):
 def _separation_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, y,
                      budget, max_order, weighting, iterations, fault_modes=DEFAULT_RULE):
     args = batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    pr = project(*args, budget, max_order, weighting, fault_modes=fault_modes)
+    pr = project(Sources(*args[:6], args[7]), args[6], budget,
+                 MHSSOptions(max_order, weighting, fault_modes, None, iterations))
     yl = to_batch_last(y, 1)  # (L, B)
     y_ok = jnp.isfinite(yl) | ~args[7]
     # a non-finite residual of a valid source: nothing claimed (no detection, no exclusion)
@@ -211,25 +208,29 @@ def _detect_and_exclude(g, constellation, var_int, var_acc, b_nom, p_sat, p_cons
     return FDEResult(detected, excluded, mode, top.tau, position, pl, pl.status)
 
 
-def _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
-                 iterations):
-    """The static arguments of the public kernels, checked (ValueError before any tracing)."""
-    check_options(budget, all_in_view_weighting)
-    rule = fault_mode_rule(fault_modes)
-    s = Sources(*sources)
+def _kernel_args(sources, p_const, budget, options):
+    """The arrays and static arguments of the public kernels, checked (ValueError before any
+    tracing)."""
+    options = kernel_options(budget, options)
+    s = Sources(*sources).filled()
     args = (s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat, p_const,
             s.valid)
-    return args, dict(budget=budget, max_order=check_order(rule, check_int("max_order",
-                                                                            max_order, 1)),
-                      weighting=all_in_view_weighting,
-                      iterations=check_int("iterations", iterations, 1), fault_modes=rule)
+    return args, _static(budget, options)
+
+
+def _static(budget, options):
+    """The private kernels' static arguments from a checked ``MHSSOptions`` with an order."""
+    if options.position_optimization is not None:
+        raise ValueError("solution separation and exclusion use the weighted least-squares "
+                         "all-in-view estimate: MHSSOptions(position_optimization=None)")
+    return dict(budget=budget, max_order=options.max_order,
+                weighting=options.all_in_view_weighting, iterations=options.iterations,
+                fault_modes=options.fault_modes)
 
 
 def separation_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
-                      budget: IntegrityBudget, residual_m: Float[ArrayLike, "*#batch L"], *,
-                      max_order: int, all_in_view_weighting: str = "int",
-                      fault_modes: str | FaultModeRule | None = None,
-                      iterations: int = PL_ITERATIONS) -> Separation:
+                      budget: IntegrityBudget, residual_m: Float[ArrayLike, "*#batch L"],
+                      options: MHSSOptions) -> Separation:
     """The solution-separation test of ``solution_separation`` as a pure JAX function:
     callable inside ``jax.jit`` and ``jax.vmap`` (inline there), jitted on its own otherwise.
 
@@ -238,56 +239,47 @@ def separation_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
       p_const: (..., C) P_const per constellation.
       budget: ``IntegrityBudget`` (static).
       residual_m: (..., L) y = z - z_hat at the all-in-view linearisation point (metres).
-      max_order: the template order (static int >= 1).
-      all_in_view_weighting, fault_modes: as ``protection_levels`` (static).
-      iterations: the iteration bound of the bracketed PL solver (static).
+      options: ``MHSSOptions`` (static) with an int ``max_order``; no
+        ``position_optimization``.
 
     Returns:
       ``Separation``. A non-finite residual or an unusable input of a valid source gives
       ``pl.status`` INVALID_INPUT (no detection); nothing raises inside the trace.
     """
-    args, static = _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting,
-                                fault_modes, iterations)
+    args, static = _kernel_args(sources, p_const, budget, options)
     return _separation(*args, residual_m, **static)
 
 
 def detect_and_exclude_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
                               budget: IntegrityBudget,
-                              residual_m: Float[ArrayLike, "*#batch L"], *, max_order: int,
-                              all_in_view_weighting: str = "int",
-                              fault_modes: str | FaultModeRule | None = None,
-                              iterations: int = PL_ITERATIONS) -> FDEResult:
+                              residual_m: Float[ArrayLike, "*#batch L"],
+                              options: MHSSOptions) -> FDEResult:
     """Detection and exclusion of ``detect_and_exclude`` as a pure JAX function, arguments as
     ``separation_kernel``. Returns ``FDEResult``; failures as data (EXCLUSION_FAILED,
     INVALID_INPUT with infinite PLs and position), never raised inside the trace."""
-    args, static = _kernel_args(sources, p_const, budget, max_order, all_in_view_weighting,
-                                fault_modes, iterations)
+    args, static = _kernel_args(sources, p_const, budget, options)
     return _detect_and_exclude(*args, residual_m, **static)
 
 
-def checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-                   valid, max_order, all_in_view_weighting, fault_modes=None):
+def checked_inputs(sources: Sources, p_const, budget: IntegrityBudget,
+                   options: MHSSOptions | None) -> tuple[Sources, jax.Array, MHSSOptions]:
     """The receiver's inputs broadcast and checked (``prepare_inputs``), the budget and the
-    weighting checked, and the static order (``required_order`` when None): (args, order).
-    ``fault_modes`` is checked by ``fault_mode_rule`` (call it first to get the rule)."""
-    rule = fault_mode_rule(fault_modes)
-    check_options(budget, all_in_view_weighting)
-    args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                          valid)
-    if max_order is None:
-        max_order = required_order(args[7], args[1], args[5], args[6], budget,
-                                   fault_modes=rule)
-    else:
-        max_order = check_order(rule, check_int("max_order", max_order, 1))
-    return args, max_order
+    options checked, and the static order (``required_order`` when None): (sources,
+    p_const, options with an int ``max_order``)."""
+    options = as_options(options)
+    check_options(budget, options.all_in_view_weighting)
+    options = options.checked()
+    s, p_const = prepare_inputs(sources, p_const)
+    if options.max_order is None:
+        options = options._replace(max_order=required_order(
+            s.valid, s.constellation, s.p_sat, p_const, budget,
+            fault_modes=options.fault_modes))
+    return s, p_const, options
 
 
-def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-            residual_m, valid, max_order, all_in_view_weighting, fault_modes):
-    rule = fault_mode_rule(fault_modes)
-    args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                                     p_const, budget, valid, max_order, all_in_view_weighting,
-                                     rule)
+def _public(fn, sources, p_const, budget, residual_m, options):
+    s, p_const, options = checked_inputs(sources, p_const, budget, options)
+    args = (*s[:6], p_const, s.valid)
     y = jnp.broadcast_to(jnp.asarray(residual_m, jnp.float64), args[0].shape[:-1])
     try:
         bad = ~np.isfinite(np.asarray(y)) & np.asarray(args[7])
@@ -297,8 +289,7 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
         raise ValueError(f"residual_m of a valid source is not finite at {batch_source(bad)}: "
                          f"{float(np.asarray(y)[bad][0])!r} (mark the source invalid or drop "
                          "the epoch)")
-    static = dict(budget=budget, max_order=max_order, weighting=all_in_view_weighting,
-                  fault_modes=rule)
+    static = _static(budget, options)
     if bad is None or is_traced(args):
         return fn(*args, y, **static)
     # padded to a bucket size (oaraim.batching.bucket): a handful of compiled shapes
@@ -308,46 +299,26 @@ def _public(fn, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
     return unpad(fn(*pad_rows(flat, bucket(n)), **static), batch, n)
 
 
-def solution_separation(g: Real[ArrayLike, "*batch L 3"],
-                        constellation: Int[ArrayLike, "*#batch #L"],
-                        var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                        var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                        b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                        p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                        p_const: Real[ArrayLike, "*#batch C"], budget: IntegrityBudget,
-                        residual_m: Real[ArrayLike, "*#batch #L"],
-                        valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
-                        max_order: int | None = None, all_in_view_weighting: str = "int",
-                        fault_modes: str | FaultModeRule | None = None) -> Separation:
+def solution_separation(sources: Sources, p_const: Real[ArrayLike, "*#batch C"],
+                        budget: IntegrityBudget, residual_m: Real[ArrayLike, "*#batch #L"],
+                        options: MHSSOptions | None = None) -> Separation:
     """Solution-separation statistics and detection (seed 004 eqs. 9-13) for measured residuals.
 
-    Arguments as ``protection_levels`` plus ``residual_m`` (..., L): y = z - z_hat at the
-    all-in-view linearisation point (metres). Returns ``Separation``: per mode and direction the
-    separation, threshold and tau; ``detected`` is any tau > 1. ``fault_modes``: the
-    convention, as ``protection_levels``.
+    Arguments as ``protection_levels`` (``options`` without ``position_optimization``) plus
+    ``residual_m`` (..., L): y = z - z_hat at the all-in-view linearisation point (metres).
+    Returns ``Separation``: per mode and direction the separation, threshold and tau;
+    ``detected`` is any tau > 1.
     """
-    return _public(_separation, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting,
-                   fault_modes)
+    return _public(_separation, sources, p_const, budget, residual_m, options)
 
 
-def detect_and_exclude(g: Real[ArrayLike, "*batch L 3"],
-                       constellation: Int[ArrayLike, "*#batch #L"],
-                       var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                       var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                       b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                       p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                       p_const: Real[ArrayLike, "*#batch C"], budget: IntegrityBudget,
-                       residual_m: Real[ArrayLike, "*#batch #L"],
-                       valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
-                       max_order: int | None = None, all_in_view_weighting: str = "int",
-                       fault_modes: str | FaultModeRule | None = None) -> FDEResult:
+def detect_and_exclude(sources: Sources, p_const: Real[ArrayLike, "*#batch C"],
+                       budget: IntegrityBudget, residual_m: Real[ArrayLike, "*#batch #L"],
+                       options: MHSSOptions | None = None) -> FDEResult:
     """Detection, then exclusion over the monitored fault modes (module docstring).
 
     Returns ``FDEResult``: ``excluded`` marks the sources removed, ``pl`` the PLs of the solution
     kept (all-in-view when nothing was detected), ``position_m`` its ENU correction S y.
-    ``fault_modes``: the convention, as ``protection_levels`` (every candidate subset uses it).
+    Arguments as ``solution_separation`` (every candidate subset uses the same options).
     """
-    return _public(_detect_and_exclude, g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                   p_const, budget, residual_m, valid, max_order, all_in_view_weighting,
-                   fault_modes)
+    return _public(_detect_and_exclude, sources, p_const, budget, residual_m, options)

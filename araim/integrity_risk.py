@@ -57,13 +57,13 @@ import numpy as np
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
-    fault_mode_rule,
     select_fault_modes,
     to_batch_first,
     to_batch_last,
 )
 from oaraim.araim.fde import checked_inputs, separation_kernel, weighted_sse
-from oaraim.araim.mhss import Sources
+from oaraim.araim.mhss import MHSSOptions, Sources
+from oaraim.araim.risk_options import DEFAULT_SAMPLING, Ramp, Sampling, Scenario
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 
@@ -168,8 +168,7 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
     cargs = _add_unit_axis(args, K, _TAILS)[:-1] + [keep]
     a = _add_unit_axis(cargs, L, _TAILS)
     sub = separation_kernel(Sources(*a[:6], a[7]), a[6], budget, jnp.broadcast_to(
-        eye, keep.shape[:-1] + (L, L)), max_order=max_order, all_in_view_weighting=weighting,
-        fault_modes=fault_modes)
+        eye, keep.shape[:-1] + (L, L)), MHSSOptions(max_order, weighting, fault_modes))
     top = jax.tree.map(lambda x: x[(Ellipsis, 0) + (slice(None),) * (x.ndim - valid.ndim)],
                        sub)  # candidate 0: (..., L units, ...)
     s0 = jnp.swapaxes(top.position_m, -1, -2)  # (..., 3, L)
@@ -214,17 +213,17 @@ def _maps(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budg
         constellation=constellation, valid=valid, p_const=p_const)
 
 
-def monitor_maps(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, budget,
-                 valid=None, *, max_order=None, all_in_view_weighting="int",
-                 fault_modes=None) -> MonitorMaps:
+def monitor_maps(sources: Sources, p_const, budget: IntegrityBudget,
+                 options: MHSSOptions | None = None) -> MonitorMaps:
     """The MHSS receiver of ``detect_and_exclude`` as linear maps of the residual (module
-    docstring). Arguments as ``araim.protection_levels`` (variances, m^2); batch first."""
-    rule = fault_mode_rule(fault_modes)
-    args, max_order = checked_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                                     p_const, budget, valid, max_order, all_in_view_weighting,
-                                     rule)
-    return _maps(*args, budget=budget, max_order=max_order, weighting=all_in_view_weighting,
-                 fault_modes=rule)
+    docstring). Arguments as ``araim.protection_levels`` (variances, m^2; ``options`` without
+    ``position_optimization``); batch first."""
+    s, p_const, options = checked_inputs(sources, p_const, budget, options)
+    if options.position_optimization is not None:
+        raise ValueError("monitor_maps models the weighted least-squares all-in-view estimate: "
+                         "MHSSOptions(position_optimization=None)")
+    return _maps(*s[:6], p_const, s.valid, budget=budget, max_order=options.max_order,
+                 weighting=options.all_in_view_weighting, fault_modes=options.fault_modes)
 
 
 def _tau(d, thr):
@@ -427,11 +426,12 @@ def _start_mean(maps, inj, mean_y, direction):
     return a.T @ jnp.linalg.solve(gram, t)
 
 
-def importance_estimate(maps: MonitorMaps, inj: Injection, magnitude_m, direction, key, *,
-                        n_samples, ce_samples, ce_rounds, crude=False,
-                        exclusion=True) -> Estimate:
+def importance_estimate(maps: MonitorMaps, inj: Injection, magnitude_m, direction, key,
+                        sampling: Sampling) -> Estimate:
     """P(HMI | scenario, magnitude) of ONE geometry by importance sampling (module docstring);
-    ``crude=True``: plain Monte Carlo (mu = 0, no rounds)."""
+    ``sampling.crude``: plain Monte Carlo (mu = 0, no rounds); ``sampling.nominal_bias`` is
+    the injection's (``inj``), not read here."""
+    n_samples, ce_samples, ce_rounds, crude, _, exclusion = sampling
     mean_y = inj.bias_m + magnitude_m * inj.fault_dir
     sig = maps.sigma_m
     symmetric = jnp.asarray((magnitude_m == 0.0) & ~crude)
@@ -504,9 +504,8 @@ def _one(maps, kind, source, const, direction, x, scale, key, n_samples, ce_samp
     inj = injection(maps, kind, source, const, direction, worst_bias)
     unit = jnp.select([scale == 0, scale == 1], [inj.a_det_m, inj.a_pl_m], 1.0)  # 2: metres
     a = jnp.where(inj.active, x * unit, 0.0)
-    est = importance_estimate(maps, inj, a, direction, key, n_samples=n_samples,
-                              ce_samples=ce_samples, ce_rounds=ce_rounds, crude=crude,
-                              exclusion=exclusion)
+    est = importance_estimate(maps, inj, a, direction, key, Sampling(
+        n_samples, ce_samples, ce_rounds, crude, "worst" if worst_bias else "zero", exclusion))
     est = jax.tree.map(lambda v: jnp.where(inj.active, v, jnp.zeros_like(v)), est)
     return inj, a, est
 
@@ -541,51 +540,53 @@ def _risk_table(maps, key, x_grid, n_constellations, n_samples, ce_samples, ce_r
 _one_jit = jax.jit(_one, static_argnames=_SIZES)
 
 
-def _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias):
-    if nominal_bias not in ("worst", "zero"):
-        raise ValueError(f"nominal_bias must be 'worst' or 'zero', got {nominal_bias!r}")
+def _check_options(maps, sampling):
+    """(n_samples, ce_samples, ce_rounds) of ``sampling``, checked, and the maps' shape."""
+    if sampling.nominal_bias not in ("worst", "zero"):
+        raise ValueError(f"nominal_bias must be 'worst' or 'zero', got {sampling.nominal_bias!r}")
     if maps.valid.ndim != 1:
         raise ValueError("the maps of one geometry are needed (no batch axes); pick geometry i "
                          "with jax.tree.map(lambda a: a[i], maps)")
-    return (check_int("n_samples", n_samples, 2), check_int("ce_samples", ce_samples, 10),
-            check_int("ce_rounds", ce_rounds, 0))
+    return (check_int("n_samples", sampling.n_samples, 2),
+            check_int("ce_samples", sampling.ce_samples, 10),
+            check_int("ce_rounds", sampling.ce_rounds, 0))
 
 
-def scenario_estimate(maps: MonitorMaps, kind, source, constellation, direction, x, key, *,
-                      scale="det", n_samples=2000, ce_samples=1000, ce_rounds=2, crude=False,
-                      nominal_bias="worst", exclusion=True):
-    """P(HMI) of ONE scenario (``kind`` FAULT_FREE / SINGLE (``source``) / CONSTELLATION or
-    PAIR (``constellation``)), ``direction`` HORIZONTAL or VERTICAL, magnitude ``x`` A_det
-    (``scale="det"``) or ``x`` A_PL (``scale="pl"``), of one geometry. Returns (Injection,
+def scenario_estimate(maps: MonitorMaps, scenario: Scenario, key,
+                      sampling: Sampling = DEFAULT_SAMPLING
+                      ) -> tuple[Injection, jax.Array, Estimate]:
+    """P(HMI) of ONE scenario of one geometry (``Scenario``: kind, direction, magnitude x in
+    units of A_det or A_PL, the faulty source or constellation). Returns (Injection,
     magnitude (m), Estimate)."""
+    kind, direction, x, source, constellation, scale = scenario
     if scale not in ("det", "pl"):
         raise ValueError(f"scale must be 'det' or 'pl', got {scale!r}")
-    sizes = _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias)
+    sizes = _check_options(maps, sampling)
     if direction not in (HORIZONTAL, VERTICAL):
         raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1), got {direction!r}")
     if not np.isfinite(x) or x < 0:
         raise ValueError(f"x (magnitude in units of A_det) must be >= 0, got {x!r}")
     return _one_jit(maps, jnp.asarray(kind), jnp.asarray(source), jnp.asarray(constellation),
                     jnp.asarray(direction), jnp.asarray(float(x)),
-                    jnp.asarray(0 if scale == "det" else 1), key, *sizes, bool(crude),
-                    nominal_bias == "worst", bool(exclusion))
+                    jnp.asarray(0 if scale == "det" else 1), key, *sizes,
+                    bool(sampling.crude), sampling.nominal_bias == "worst",
+                    bool(sampling.exclusion))
 
 
-def risk_table(maps: MonitorMaps, key, x_grid=DEFAULT_X_GRID, *, n_samples=2000,
-               ce_samples=1000, ce_rounds=2, crude=False, nominal_bias="worst",
-               exclusion=True) -> RiskTable:
+def risk_table(maps: MonitorMaps, key, x_grid=DEFAULT_X_GRID,
+               sampling: Sampling = DEFAULT_SAMPLING) -> RiskTable:
     """P(HMI | scenario, magnitude) for every scenario slot, magnitude and direction of ONE
     geometry (``maps`` without batch axes): 2 X magnitudes, ``x_grid`` x A_det then ``x_grid``
-    x A_PL. ``crude=True`` for plain Monte Carlo."""
-    n_samples, ce_samples, ce_rounds = _check_options(maps, n_samples, ce_samples, ce_rounds,
-                                                      nominal_bias)
+    x A_PL. ``Sampling(crude=True)`` for plain Monte Carlo."""
+    n_samples, ce_samples, ce_rounds = _check_options(maps, sampling)
     x = np.asarray(x_grid, float)
     if x.ndim != 1 or x.size == 0 or np.any(~np.isfinite(x)) or np.any(x < 0):
         raise ValueError(f"x_grid must be a non-empty list of magnitudes >= 0 (units of A_det), "
                          f"got {x_grid!r}")
     C = maps.p_const.shape[-1]
     out = _risk_table(maps, key, jnp.asarray(x), C, n_samples, ce_samples, ce_rounds,
-                      bool(crude), nominal_bias == "worst", bool(exclusion))
+                      bool(sampling.crude), sampling.nominal_bias == "worst",
+                      bool(sampling.exclusion))
     kind, source, const = scenario_slots(maps.valid.shape[-1], C)
     return RiskTable(kind, source, const, *out)
 
@@ -615,15 +616,15 @@ def _ramp(maps, source, direction, magnitudes, key, n_samples, ce_samples, ce_ro
     return jax.lax.map(one, (jnp.arange(magnitudes.shape[0]), magnitudes))
 
 
-def ramp_risk(maps: MonitorMaps, source, direction, rate_mps, duration_s, epoch_s, key, *,
-              n_samples=2000, ce_samples=1000, ce_rounds=2, nominal_bias="worst",
-              exclusion=True) -> RampRisk:
-    """A ramp on ``source`` (a tower clock drifting away, a slowly growing multipath or
+def ramp_risk(maps: MonitorMaps, ramp: Ramp, key,
+              sampling: Sampling = DEFAULT_SAMPLING) -> RampRisk:
+    """A ramp on ``ramp.source`` (a tower clock drifting away, a slowly growing multipath or
     ephemeris error): at epoch t = epoch_s, 2 epoch_s, ..., duration_s the fault is rate x t
     along the source's slope sign (``injection``), and each epoch is a snapshot with fresh
     nominal noise. Returns every epoch's P(HMI) and two summaries: the mean per-epoch risk over
     the ramp and the union bound on an HMI at some epoch (no independence assumed)."""
-    sizes = _check_options(maps, n_samples, ce_samples, ce_rounds, nominal_bias)
+    source, direction, rate_mps, duration_s, epoch_s = ramp
+    sizes = _check_options(maps, sampling)
     if direction not in (HORIZONTAL, VERTICAL):
         raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1), got {direction!r}")
     for name, v in (("rate_mps", rate_mps), ("duration_s", duration_s), ("epoch_s", epoch_s)):
@@ -636,7 +637,8 @@ def ramp_risk(maps: MonitorMaps, source, direction, rate_mps, duration_s, epoch_
     t = epoch_s * np.arange(1, n + 1)
     mags = rate_mps * t
     e = _ramp(maps, jnp.asarray(source), jnp.asarray(direction), jnp.asarray(mags), key,
-              *sizes, False, nominal_bias == "worst", bool(exclusion))
+              *sizes, bool(sampling.crude), sampling.nominal_bias == "worst",
+              bool(sampling.exclusion))
     p = np.asarray(e.p_md)
     return RampRisk(t, mags, p, np.asarray(e.se_md), np.asarray(e.p_we),
                     np.asarray(e.p_detect), float(p.mean()), float(min(1.0, p.sum())))

@@ -55,16 +55,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
-from jaxtyping import Bool, Int, Real
+from jaxtyping import Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
 from oaraim.araim.chi2 import detection_threshold, lambda_det_table
 from oaraim.araim.fde import detect_and_exclude
-from oaraim.araim.mhss import protection_levels, required_order
+from oaraim.araim.mhss import MHSSOptions, Sources, protection_levels, required_order
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_probability
-from oaraim.araim.wnls import WNLSResult, wnls
+from oaraim.araim.wnls import WNLSOptions, WNLSResult, wnls
 
 #: chi-square slope RAIM defaults (seed 001 is silent; the values of our seed 001 studies)
 DEFAULT_P_FA = 1e-5
@@ -336,14 +336,31 @@ DEFAULT_REPLAY = ReplayConfig()
 _PerSource = Real[ArrayLike, "*#t #L"] | Real[ArrayLike, ""]
 
 
+class ReplaySources(NamedTuple):
+    """What the receiver of ``replay`` assumes of each source: arrays (T, L) or anything
+    that broadcasts to them."""
+
+    var_int_m2: object
+    """(T, L) nominal error VARIANCES for integrity (the ADD's C_int, m^2;
+    ``araim.error_models``). WNLS and slope RAIM weight with C_int^-1."""
+    var_acc_m2: object
+    """(T, L) nominal error variances for accuracy and continuity (C_acc, m^2)."""
+    valid: object
+    """(T, L) bool: sources used (observed, healthy, above the mask, not padding)."""
+    constellation: object = None
+    """(T, L) clock groups 0..C-1 (None: all 0); C = len(p_const)."""
+    p_sat: object = 1e-5
+    """P_s per source (Table I GPS: 1e-5)."""
+    b_nom_m: object = 0.75
+    """b_nom per source, m (Table I GPS: 0.75 m)."""
+    slope_sigma_m: object = None
+    """(T, L) sigmas of slope RAIM, m; None: sqrt(var_int_m2)."""
+
+
 def replay(pseudorange_m: Real[ArrayLike, "T L"], tx_pos_m: Real[ArrayLike, "*#t #L 3"],
-           var_int_m2: _PerSource, var_acc_m2: _PerSource,
-           valid: Bool[ArrayLike, "*#t #L"] | Bool[ArrayLike, ""],
-           truth_m: Real[ArrayLike, "*#t 3"], *, correction_m: _PerSource = 0.0,
-           constellation: Int[ArrayLike, "*#t #L"] | Int[ArrayLike, ""] | None = None,
-           p_const: Real[ArrayLike, "*#t C"] | Sequence[float] = (1e-8,),
-           p_sat: _PerSource = 1e-5, b_nom_m: _PerSource = 0.75,
-           slope_sigma_m: _PerSource | None = None,
+           sources: ReplaySources, truth_m: Real[ArrayLike, "*#t 3"],
+           p_const: Real[ArrayLike, "*#t C"] | Sequence[float] = (1e-8,), *,
+           correction_m: _PerSource = 0.0,
            x0_m: Real[ArrayLike, "*#t state"] | None = None,
            config: ReplayConfig = DEFAULT_REPLAY) -> ReplayResult:
     """Snapshot replay of T epochs of L sources (module docstring).
@@ -352,16 +369,12 @@ def replay(pseudorange_m: Real[ArrayLike, "T L"], tx_pos_m: Real[ArrayLike, "*#t
       pseudorange_m: (T, L) measured pseudoranges, metres (anything where not valid).
       tx_pos_m: (T, L, 3) transmitter positions in the frame of the reception time (GNSS:
         broadcast position at transmit time, Sagnac-rotated; SOP: the tower).
-      var_int_m2, var_acc_m2: (T, L) nominal error VARIANCES for integrity and accuracy (the
-        ADD's C_int, C_acc; ``araim.error_models``). WNLS and slope RAIM weight with C_int^-1.
-      valid: (T, L) sources used (observed, healthy, above the mask, not padding).
+      sources: ``ReplaySources``: the C_int and C_acc variances, ``valid``, the clock groups,
+        P_s, b_nom and the slope RAIM sigmas of each source.
       truth_m: (3,) or (T, 3) true receiver position (same frame).
+      p_const: (C,) P_const per group (seed 004 Table I: GPS 1e-8, SOP 1e-4).
       correction_m: (T, L) known corrections added to the pseudorange (GNSS: + c (dt_sv -
         T_GD) - iono - tropo).
-      constellation: (T, L) clock groups 0..C-1 (default all 0); C = len(p_const).
-      p_const: (C,) P_const per group (seed 004 Table I: GPS 1e-8, SOP 1e-4).
-      p_sat, b_nom_m: P_s and b_nom per source (Table I GPS: 1e-5, 0.75 m), broadcastable.
-      slope_sigma_m: (T, L) sigmas of slope RAIM; default sqrt(var_int_m2).
       x0_m: (3,) or (T, 3) WNLS start (default the frame origin: the Earth's centre converges
         for GNSS; give a nearby point for SOP-only epochs).
       config: ``ReplayConfig``: monitors, MHSS budget, fault modes and order, slope RAIM
@@ -373,6 +386,10 @@ def replay(pseudorange_m: Real[ArrayLike, "T L"], tx_pos_m: Real[ArrayLike, "*#t
     if not isinstance(config, ReplayConfig):
         raise ValueError(f"config must be an araim.snapshot.ReplayConfig, got "
                          f"{type(config).__name__}")
+    if not isinstance(sources, ReplaySources):
+        raise ValueError(f"sources must be an araim.snapshot.ReplaySources, got "
+                         f"{type(sources).__name__}")
+    var_int_m2, var_acc_m2, valid, constellation, p_sat, b_nom_m, slope_sigma_m = sources
     monitors, budget, fault_modes = config.monitors, config.budget, config.fault_modes
     max_order, p_fa, p_md = config.max_order, config.p_fa, config.p_md
     n_iter, frame = config.n_iter, config.frame
@@ -420,7 +437,7 @@ def replay(pseudorange_m: Real[ArrayLike, "T L"], tx_pos_m: Real[ArrayLike, "*#t
         raise ValueError("truth_m must be finite")
 
     sol = wnls(z, tx, np.sqrt(np.where(valid, var_int, 1.0)), x0_m=x0_m, valid=valid,
-               clock_index=cons, n_clocks=n_clocks, n_iter=n_iter)
+               clock_index=cons, options=WNLSOptions(n_clocks, n_iter))
     used_epoch, used, g, err, hpe, vpe = _solution_terms(sol.position_m, tx, valid, sol.status,
                                                          truth, frame_ecef)
 
@@ -566,11 +583,10 @@ def _mhss_monitor(sol, g, used, cons, used_epoch, truth, var_int, var_acc, p_sat
     var_int_u = np.where(np.asarray(used), var_int, 1.0)
     var_acc_u = np.where(np.asarray(used), var_acc, 1.0)
     pc = np.broadcast_to(p_const, shape[:1] + (n_clocks,))
-    pl = protection_levels(g, cons, var_int_u, var_acc_u, b_nom, p_sat_a, pc, budget,
-                           valid=used, max_order=max_order, fault_modes=fault_modes)
-    fde = detect_and_exclude(g, cons, var_int_u, var_acc_u, b_nom, p_sat_a, pc, budget,
-                             sol.residual_m, valid=used, max_order=max_order,
-                             fault_modes=fault_modes)
+    sources = Sources(g, cons, var_int_u, var_acc_u, b_nom, p_sat_a, used)
+    options = MHSSOptions(max_order, fault_modes=fault_modes)
+    pl = protection_levels(sources, pc, budget, options)
+    fde = detect_and_exclude(sources, pc, budget, sol.residual_m, options)
     pos, m_err, m_hpe, m_vpe = _mhss_terms(sol.position_m, fde.position_m, used_epoch, truth,
                                            frame_ecef)
     sep_tau = jnp.max(jnp.where(jnp.isfinite(fde.tau), fde.tau, 0.0), axis=(-2, -1))

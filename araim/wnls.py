@@ -27,6 +27,26 @@ from oaraim.araim.validate import (
 )
 
 
+class WNLSOptions(NamedTuple):
+    """The static settings of ``wnls`` and ``wnls_kernel``."""
+
+    n_clocks: int = 1
+    """Number of clock groups C (one clock bias each)."""
+    n_iter: int = 10
+    """Fixed number of Gauss-Newton iterations."""
+    tol_m: float = 1e-4
+    """The last step must be below this for status OK (else NOT_CONVERGED), metres."""
+
+
+def _wnls_options(options):
+    """``options`` (None: the defaults) as a checked ``WNLSOptions``."""
+    if options is None:
+        return WNLSOptions()
+    if not isinstance(options, WNLSOptions):
+        raise ValueError(f"options must be an araim.WNLSOptions, got {type(options).__name__}")
+    return WNLSOptions(int(options.n_clocks), int(options.n_iter), options.tol_m)
+
+
 class WNLSResult(NamedTuple):
     """The solution of ``wnls`` and ``wnls_kernel``."""
 
@@ -138,16 +158,17 @@ _wnls_jit = jax.jit(_wnls_kernel, static_argnames=("n_clocks", "n_iter"))
 def wnls_kernel(pseudorange_m: Float[ArrayLike, "*batch L"],
                 tx_pos_m: Float[ArrayLike, "*#batch L 3"], sigma_m: Float[ArrayLike, "*batch L"],
                 x0_m: Float[ArrayLike, "*batch state"], valid: Bool[ArrayLike, "*batch L"],
-                clock_index: Int[ArrayLike, "*batch L"], *, n_clocks: int = 1,
-                n_iter: int = 10, tol_m: float = 1e-4) -> WNLSResult:
+                clock_index: Int[ArrayLike, "*batch L"],
+                options: WNLSOptions | None = None) -> WNLSResult:
     """The WNLS solution of ``wnls`` as a jitted JAX function of arrays already broadcast to
     one batch shape (no host conversion or checks): callable inside ``jax.jit`` and
     ``jax.vmap``. pseudorange_m, sigma_m, valid, clock_index ``(..., L)``; tx_pos_m
-    ``(..., L, 3)``; x0_m ``(..., 3 + n_clocks)``; n_clocks and n_iter static. An unusable
-    input of a valid source (or a non-finite x0_m) gives ``Status.INVALID_INPUT`` with
-    infinite outputs, never an exception inside the trace."""
+    ``(..., L, 3)``; x0_m ``(..., 3 + n_clocks)``; ``options`` (``WNLSOptions``: n_clocks,
+    n_iter, tol_m) static. An unusable input of a valid source (or a non-finite x0_m) gives
+    ``Status.INVALID_INPUT`` with infinite outputs, never an exception inside the trace."""
+    n_clocks, n_iter, tol_m = _wnls_options(options)
     return _wnls_jit(pseudorange_m, tx_pos_m, sigma_m, x0_m, valid, clock_index,
-                     n_clocks=int(n_clocks), n_iter=int(n_iter), tol_m=tol_m)
+                     n_clocks=n_clocks, n_iter=n_iter, tol_m=tol_m)
 
 
 def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "*#batch L 3"],
@@ -155,7 +176,7 @@ def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "
          x0_m: Real[ArrayLike, "*#batch state"] | None = None,
          valid: Bool[ArrayLike, "*#batch #L"] | None = None,
          clock_index: Int[ArrayLike, "*#batch #L"] | Int[ArrayLike, ""] | None = None,
-         n_clocks: int = 1, n_iter: int = 10, tol_m: float = 1e-4) -> WNLSResult:
+         options: WNLSOptions | None = None) -> WNLSResult:
     """Batched iterated WNLS position and clock solution (seed 001 section 2.4).
 
     Args:
@@ -167,9 +188,9 @@ def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "
         zero clocks (the Earth's centre converges for GNSS in ECEF in ~6 iterations).
       valid: ``(..., L)`` mask of sources used.
       clock_index: ``(..., L)`` int clock group of each source in 0..n_clocks-1; default all 0.
-      n_clocks: number of clock groups (static).
-      n_iter: fixed number of Gauss-Newton iterations (static).
-      tol_m: the last step must be below this for status OK (else NOT_CONVERGED).
+      options: ``WNLSOptions`` (static; None: the defaults): the number of clock groups
+        n_clocks (1), of Gauss-Newton iterations n_iter (10) and the convergence tolerance
+        tol_m (1e-4 m: the last step must be below it for status OK, else NOT_CONVERGED).
 
     Returns:
       ``WNLSResult``. A singular step is skipped (the state stays finite) and flagged
@@ -182,6 +203,8 @@ def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "
       geometry gets ``Status.INVALID_INPUT`` instead: position, clocks, residuals of valid
       sources, wsse, last step and covariance inf, never NaN.
     """
+    options = _wnls_options(options)
+    n_clocks = options.n_clocks
     pr = jnp.asarray(pseudorange_m, jnp.float64)
     tx = jnp.asarray(tx_pos_m, jnp.float64)
     shape = pr.shape
@@ -198,8 +221,7 @@ def wnls(pseudorange_m: Real[ArrayLike, "*batch L"], tx_pos_m: Real[ArrayLike, "
         if x0.shape[-1] == 3:
             x0 = jnp.concatenate([x0, jnp.zeros(x0.shape[:-1] + (n_clocks,))], axis=-1)
         x0 = jnp.broadcast_to(x0, batch + (3 + n_clocks,))
-    res = wnls_kernel(pr, tx, sigma, x0, valid, clock_index, n_clocks=n_clocks, n_iter=n_iter,
-                      tol_m=tol_m)
+    res = wnls_kernel(pr, tx, sigma, x0, valid, clock_index, options)
     host = host_values(res.status)
     if host is not None and np.any(host[0] == Status.INVALID_INPUT):
         _name_invalid_input(pr, tx, sigma, x0, valid, clock_index, int(n_clocks))

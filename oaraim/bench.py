@@ -160,13 +160,13 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5, case="table-i"):
     inputs, budget_name, order, fault_modes = MHSS_CASES[case]
     x = inputs(batch)
     budget = getattr(araim, budget_name)
-    args = (x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
-            x["p_sat"], x["p_const"], x["valid"])
 
     def call(threads=None):
         # the public entry point, host-side input checks and thread split included
-        return araim.protection_levels(*args[:7], budget, args[7], max_order=order,
-                                       threads=threads, fault_modes=fault_modes)
+        sources = araim.Sources(*(x[k] for k in araim.Sources._fields))
+        return araim.protection_levels(sources, x["p_const"], budget,
+                                       araim.MHSSOptions(order, fault_modes=fault_modes),
+                                       threads=threads)
 
     def run():
         return call().hpl_m.block_until_ready()
@@ -184,10 +184,10 @@ def bench_mhss(batch=65_536, ref_geometries=200, repeats=5, case="table-i"):
     xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
 
     def run_ref():
+        opts = reference_mhss.ReferenceOptions(max_order=order, fault_modes=fault_modes)
         return [reference_mhss.protection_levels_reference(
-            xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
-            xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
-            max_order=order, fault_modes=fault_modes) for i in range(ref_geometries)]
+            tuple(xs[k][i] for k in araim.Sources._fields), xs["p_const"][i], budget, opts)
+            for i in range(ref_geometries)]
 
     # best of 3, as the JAX side is best of ``repeats`` after a warm-up call: one cold
     # pass of 200 geometries (~0.4 s) took the load spikes of this shared host alone
@@ -230,7 +230,8 @@ def profile_mhss(batch=65_536, repeats=3):
             if upto == "fault_modes":
                 out = fault_modes_batch_last(a[7], a[1], a[5], a[6], budget.p_thresh, 1).prior
             else:
-                pr = project(*a, budget, 1, "int", fault_modes=GROUPED)
+                pr = project(araim.Sources(*a[:6], a[7]), a[6], budget,
+                             araim.MHSSOptions(1, fault_modes=GROUPED))
                 if upto == "projectors":
                     out = pr.threshold + pr.bias + pr.sigma
                 else:
@@ -316,10 +317,9 @@ def bench_latency(batches=LATENCY_BATCHES, calls=300, fault_modes=None):
         a = {k: v[:n] for k, v in x.items()}
 
         def call(a=a):
-            r = araim.protection_levels(a["g"], a["constellation"], a["var_int_m2"],
-                                        a["var_acc_m2"], a["b_nom_m"], a["p_sat"],
-                                        a["p_const"], budget, a["valid"],
-                                        fault_modes=fault_modes)
+            r = araim.protection_levels(araim.Sources(*(a[k] for k in araim.Sources._fields)),
+                                        a["p_const"], budget,
+                                        araim.MHSSOptions(fault_modes=fault_modes))
             return r.hpl_m.block_until_ready()
 
         call()
@@ -341,9 +341,8 @@ from oaraim import araim
 from oaraim.bench import mhss_bench_inputs
 t1 = time.perf_counter()
 x = mhss_bench_inputs(64, seed=4)
-r = araim.protection_levels(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
-                            x["b_nom_m"], x["p_sat"], x["p_const"],
-                            araim.BUDGET_SEED004_TABLE_I, x["valid"])
+r = araim.protection_levels(araim.Sources(*(x[k] for k in araim.Sources._fields)), x["p_const"],
+                            araim.BUDGET_SEED004_TABLE_I)
 r.hpl_m.block_until_ready()
 print(t1 - t0, time.perf_counter() - t1)
 """
@@ -461,7 +460,8 @@ def bench_integrity_risk(samples=200_000, ref_samples=200, repeats=3):
     args = (x["g"][0], x["constellation"][0], x["var_int_m2"][0], x["var_acc_m2"][0],
             x["b_nom_m"][0], x["p_sat"][0], x["p_const"][0])
     t0 = time.perf_counter()
-    maps = ir.monitor_maps(*args, budget, x["valid"][0], max_order=1, fault_modes="grouped")
+    maps = ir.monitor_maps(araim.Sources(*args[:6], x["valid"][0]), args[6], budget,
+                           araim.MHSSOptions(1, fault_modes="grouped"))
     jax.block_until_ready(maps)
     t_maps = time.perf_counter() - t0
     sig = np.sqrt(np.asarray(x["var_int_m2"][0]))
@@ -474,9 +474,9 @@ def bench_integrity_risk(samples=200_000, ref_samples=200, repeats=3):
     nargs = [np.asarray(a) for a in args]
 
     def run_ref():
-        return [reference_mhss.detect_and_exclude_reference(*nargs, budget, ys[i],
-                                                            np.asarray(x["valid"][0]), 1,
-                                                            fault_modes="grouped")
+        src = araim.Sources(*nargs[:6], np.asarray(x["valid"][0]))
+        opts = reference_mhss.ReferenceOptions(1, fault_modes="grouped")
+        return [reference_mhss.detect_and_exclude_reference(src, nargs[6], budget, ys[i], opts)
                 for i in range(ref_samples)]
 
     refs = []
@@ -487,16 +487,16 @@ def bench_integrity_risk(samples=200_000, ref_samples=200, repeats=3):
     jax.block_until_ready(ir.risk_table(maps, key))
     t_table = _best_time(lambda: jax.block_until_ready(ir.risk_table(maps, key).estimate), 1)
     # equal relative error: fault-free vertical P(HMI), IS vs crude at the measured costs
-    opts = dict(n_samples=2000, ce_samples=1000, ce_rounds=2)
-    est = lambda **kw: ir.scenario_estimate(  # noqa: E731
-        maps, ir.FAULT_FREE, -1, -1, ir.VERTICAL, 0.0, key, **kw)[2]
-    jax.block_until_ready(est(**opts))
-    t_is = _best_time(lambda: jax.block_until_ready(est(**opts)), repeats)
-    e = est(**opts)
+    opts = ir.Sampling(n_samples=2000, ce_samples=1000, ce_rounds=2)
+    crude = ir.Sampling(n_samples=samples, crude=True)
+    est = lambda sampling: ir.scenario_estimate(  # noqa: E731
+        maps, ir.Scenario(ir.FAULT_FREE, ir.VERTICAL, 0.0), key, sampling)[2]
+    jax.block_until_ready(est(opts))
+    t_is = _best_time(lambda: jax.block_until_ready(est(opts)), repeats)
+    e = est(opts)
     p, rel = float(e.p_md), float(e.se_md) / float(e.p_md)
-    jax.block_until_ready(est(n_samples=samples, crude=True))
-    t_crude = _best_time(lambda: jax.block_until_ready(est(n_samples=samples, crude=True)),
-                         repeats)
+    jax.block_until_ready(est(crude))
+    t_crude = _best_time(lambda: jax.block_until_ready(est(crude)), repeats)
     crude_s = t_crude / samples * (1 - p) / (p * rel**2)
     return {"samples": samples, "evaluate_s": t, "samples_per_s": samples / t,
             "reference_samples": ref_samples, "reference_s": t_ref,

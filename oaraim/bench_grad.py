@@ -41,8 +41,8 @@ def bench_gradient(batch: int = 16_384, repeats: int = 3) -> dict:
     def hpl(p, fixed=fixed):
         sources = araim.Sources(p["g"], fixed["constellation"], p["var_int_m2"],
                                 p["var_acc_m2"], p["b_nom_m"], p["p_sat"], fixed["valid"])
-        return araim.protection_levels_kernel(sources, p["p_const"], budget, max_order=1,
-                                              fault_modes="grouped").hpl_m
+        return araim.protection_levels_kernel(sources, p["p_const"], budget, araim.MHSSOptions(
+            1, fault_modes="grouped")).hpl_m
 
     def total(p, fixed):
         h = hpl(p, fixed)

@@ -58,8 +58,6 @@ def bench_leo(host_info, batch=4_096, ref_geometries=10, repeats=3):
     for L, rule in LEO_CASES:
         n = batch if L <= 20 else min(batch, ORDER2_BATCH)
         x = leo_inputs(n, L)
-        args = [x[k] for k in ("g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m",
-                               "p_sat", "p_const")]
         budget = araim.BUDGET_LPV200
         order = int(araim.required_order(x["valid"][:1], x["constellation"][:1],
                                          x["p_sat"][:1], x["p_const"][:1],
@@ -67,8 +65,10 @@ def bench_leo(host_info, batch=4_096, ref_geometries=10, repeats=3):
                                          cap=2, fault_modes=rule))
 
         reps = repeats if order == 1 else 1
-        call = functools.partial(araim.protection_levels, *args, budget, x["valid"],
-                                 max_order=order, fault_modes=rule)
+        sources = araim.Sources(*(x[k] for k in ("g", "constellation", "var_int_m2",
+                                                 "var_acc_m2", "b_nom_m", "p_sat", "valid")))
+        call = functools.partial(araim.protection_levels, sources, x["p_const"],
+                                 budget, araim.MHSSOptions(order, fault_modes=rule))
 
         res = call()
         res.hpl_m.block_until_ready()
@@ -80,10 +80,10 @@ def bench_leo(host_info, batch=4_096, ref_geometries=10, repeats=3):
         t = min(times)
         xs = {k: np.asarray(v[:ref_geometries]) for k, v in x.items()}
         t0 = time.perf_counter()
+        opts = reference_mhss.ReferenceOptions(max_order=order, fault_modes=rule)
         refs = [reference_mhss.protection_levels_reference(
-            xs["g"][i], xs["constellation"][i], xs["var_int_m2"][i], xs["var_acc_m2"][i],
-            xs["b_nom_m"][i], xs["p_sat"][i], xs["p_const"][i], budget, xs["valid"][i],
-            max_order=order, fault_modes=rule) for i in range(ref_geometries)]
+            tuple(xs[k][i] for k in araim.Sources._fields), xs["p_const"][i], budget, opts)
+            for i in range(ref_geometries)]
         t_ref = time.perf_counter() - t0
         diff = max(abs(float(a) - r.vpl_m) if np.isfinite(r.vpl_m) else 0.0
                    for a, r in zip(np.asarray(res.vpl_m[:ref_geometries]), refs, strict=True))

@@ -169,8 +169,36 @@ def fault_mode_set(valid, constellation, p_sat, p_const, p_thresh, max_order):
 EVENT_RULES = ("add-v4.2", "add-v3", "add-v3-consolidated", "blanch-2012")
 
 
+def _rule_parts(rule):
+    """(name, fc_thres, sat_share) of a rule name or of an object carrying them."""
+    if isinstance(rule, str):
+        return rule, 0.01, 0.5
+    return rule.name, float(rule.fc_thres), float(rule.sat_share)
+
+
+@dataclass(frozen=True)
+class ReferenceOptions:
+    """The options of the oracle's functions (``araim.MHSSOptions``' counterpart, plus the
+    singularity tolerance of its projector)."""
+
+    max_order: int = 3
+    """The fault-mode order (``grouped`` up to 3, the event conventions up to 2)."""
+    fault_modes: object = "grouped"
+    """"grouped" (``fault_mode_set``), a name of ``EVENT_RULES`` or an object with ``name``,
+    ``fc_thres`` and ``sat_share`` (``event_fault_mode_set``)."""
+    singular_rtol: float = SINGULAR_RTOL
+    """Relative pivot tolerance below which a mode's normal matrix is singular."""
+    position_optimization: object = None
+    """None or an ``araim.PositionOptimization`` (``adjusted_estimator``)."""
+
+
+def _options(options):
+    """``options``, or the defaults for None."""
+    return ReferenceOptions() if options is None else options
+
+
 def event_fault_mode_set(valid, constellation, p_sat, p_const, budget, rule="add-v4.2",
-                         max_order=2, fc_thres=0.01, sat_share=0.5):
+                         max_order=2):
     """The event conventions of ``araim.FaultModeRule`` for one geometry, by enumeration.
 
     Events: every valid source and every present constellation. Every set E of up to R events
@@ -178,8 +206,11 @@ def event_fault_mode_set(valid, constellation, p_sat, p_const, budget, rule="add
     P0 prod_{e in E} p_e / (1 - p_e); the folding, the selection and P_NM = 1 - P0 - sum of the
     monitored priors follow the rule's docstring literally (a sorted list walked until P_NM
     fits); selected sets of more than ``max_order`` events are not monitored (they stay in
-    P_NM); selected sets with the same exclusion set are one mode, priors summed.
+    P_NM); selected sets with the same exclusion set are one mode, priors summed. ``rule``: a
+    name of ``EVENT_RULES`` (fc_thres 0.01, sat_share 0.5) or an object with ``name``,
+    ``fc_thres`` and ``sat_share`` (an ``araim.FaultModeRule``).
     """
+    rule, fc_thres, sat_share = _rule_parts(rule)
     valid, constellation, p_sat, p_const, present, sources = _inputs(valid, constellation,
                                                                      p_sat, p_const)
     events = [("s", int(l)) for l in np.flatnonzero(valid)] + [("c", c) for c in present]
@@ -364,15 +395,19 @@ def solve_pl(prior_fault_free, sigma0, bias0, priors, sigmas, offsets, rhs):
     return 0.5 * (lo + hi)
 
 
-def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                budget, valid=None, max_order=3, singular_rtol=SINGULAR_RTOL,
-                                fault_modes="grouped", position_optimization=None):
+def protection_levels_reference(sources, p_const, budget, options=None):
     """Seed 004 eqs. (8)-(16) for ONE geometry; arguments as ``araim.protection_levels`` without
-    batch axes: g (L, 3), constellation/var_int/var_acc/b_nom/p_sat/valid (L,), p_const (C,).
-    ``fault_modes``: "grouped" (``fault_mode_set``) or one of ``EVENT_RULES``
-    (``event_fault_mode_set``, max_order at most 2). ``position_optimization``: None or an
-    ``araim.PositionOptimization`` (``adjusted_estimator``; the result's ``position_adjusted``
-    says whether its PLs are the adjusted estimator's)."""
+    batch axes: ``sources`` the seven fields of an ``araim.Sources`` in its order (g (L, 3),
+    constellation, var_int, var_acc, b_nom, p_sat, valid (L,) or None; any sequence: this
+    module imports nothing of the package), p_const (C,). ``options``: ``ReferenceOptions``
+    (None: the defaults): ``fault_modes`` "grouped" (``fault_mode_set``) or one of
+    ``EVENT_RULES`` (``event_fault_mode_set``, max_order at most 2); ``position_optimization``
+    None or an ``araim.PositionOptimization`` (``adjusted_estimator``; the result's
+    ``position_adjusted`` says whether its PLs are the adjusted estimator's)."""
+    g, constellation, var_int, var_acc, b_nom, p_sat, valid = sources
+    options = _options(options)
+    max_order, fault_modes = options.max_order, options.fault_modes
+    singular_rtol, position_optimization = options.singular_rtol, options.position_optimization
     g = np.asarray(g, float)
     L = g.shape[0]
     valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
@@ -382,7 +417,7 @@ def protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat
     b_nom = np.where(valid, np.asarray(b_nom, float), 0.0)
     g = np.where(valid[:, None], g, 0.0)
 
-    if fault_modes == "grouped":
+    if isinstance(fault_modes, str) and fault_modes == "grouped":
         fm = fault_mode_set(valid, constellation, p_sat, p_const, budget.p_thresh, max_order)
     else:
         fm = event_fault_mode_set(valid, constellation, p_sat, p_const, budget, fault_modes,
@@ -522,12 +557,11 @@ class Separation:
     excluded: list  # frozensets, the excluded sources of each monitored mode
 
 
-def solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                  budget, residual, valid=None, max_order=3,
-                                  fault_modes="grouped"):
-    """Eq. (13) for one geometry and residual vector y (L,): separations, tau and detection."""
-    res = protection_levels_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                      budget, valid, max_order, fault_modes=fault_modes)
+def solution_separation_reference(sources, p_const, budget, residual, options=None):
+    """Eq. (13) for one geometry and residual vector y (L,): separations, tau and detection.
+    Arguments as ``protection_levels_reference`` plus the residual."""
+    valid = sources[6]
+    res = protection_levels_reference(sources, p_const, budget, options)
     y = np.asarray(residual, float)
     if valid is not None:
         y = np.where(np.asarray(valid, bool), y, 0.0)
@@ -568,16 +602,19 @@ def weighted_sse(g, constellation, kept, var_int, y):
     return float(np.sum(r**2 / var_int[rows]))
 
 
-def detect_and_exclude_reference(g, constellation, var_int, var_acc, b_nom, p_sat, p_const,
-                                 budget, residual, valid=None, max_order=3,
-                                 fault_modes="grouped"):
+def detect_and_exclude_reference(sources, p_const, budget, residual, options=None):
     """Detection and exclusion for one geometry: re-test every monitorable mode's subset with the
-    same residual; among the subsets that pass with status OK keep the smallest weighted SSE."""
+    same residual; among the subsets that pass with status OK keep the smallest weighted SSE.
+    Arguments as ``solution_separation_reference``."""
+    g, constellation, var_int, var_acc, b_nom, p_sat, valid = sources
     L = np.asarray(g).shape[0]
     valid = np.ones(L, bool) if valid is None else np.asarray(valid, bool)
     y = np.where(valid, np.asarray(residual, float), 0.0)
-    sep = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
-                                        p_const, budget, y, valid, max_order, fault_modes)
+
+    def with_valid(v):
+        return (g, constellation, var_int, var_acc, b_nom, p_sat, v)
+
+    sep = solution_separation_reference(with_valid(valid), p_const, budget, y, options)
     if not sep.detected:
         return FDE(False, np.zeros(L, bool), sep.result, sep.result.status, [])
     g_clean = np.where(valid[:, None], np.asarray(g, float), 0.0)
@@ -586,9 +623,7 @@ def detect_and_exclude_reference(g, constellation, var_int, var_acc, b_nom, p_sa
     for excl in sep.excluded:
         sub_valid = valid.copy()
         sub_valid[list(excl)] = False
-        sub = solution_separation_reference(g, constellation, var_int, var_acc, b_nom, p_sat,
-                                            p_const, budget, y, sub_valid, max_order,
-                                            fault_modes)
+        sub = solution_separation_reference(with_valid(sub_valid), p_const, budget, y, options)
         ok = sub.result.status == OK and not sub.detected
         sse = weighted_sse(g_clean, np.asarray(constellation, int), sub_valid, vi, y) if ok \
             else np.inf

@@ -171,7 +171,7 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         src = araim.Sources(u, con, jnp.full(n_t, var_f), jnp.full(n_t, var_f),
                             jnp.zeros(n_t), p_sat, valid)
         sn = araim.separation_kernel(src, p_const, cfg.budget, z - z_hat,
-                                     max_order=cfg.max_order, fault_modes=rule)
+                                     araim.MHSSOptions(cfg.max_order, fault_modes=rule))
         pos_snap = bank.r[0] + sn.position_m
         hpe = jnp.stack([jnp.linalg.norm(bank.r[0, :2] - pos_e[:2]),
                          jnp.linalg.norm(xi.state.r[:2] - pos_e[:2]),

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry, mc
+from oaraim import araim, mc
 from oaraim.araim import IntegrityBudget
 from oaraim.araim import integrity_risk as ir
 from oaraim.mc import Values
@@ -88,18 +88,17 @@ def outputs():
 
 
 def geometry_inputs(key, jtable, n_sops, params):
-    """Inputs of one geometry: GPS at an epoch of the day table, then n_sops BPP towers."""
+    """One geometry: (its GPS epoch, its ``araim.Sources``: GPS at an epoch of the day table,
+    then n_sops BPP towers, P_const)."""
     epoch, az, el, v = c.draw_gps(key, jtable["az_rad"], jtable["el_rad"], jtable["valid"])
-    x = c.gps_inputs(el, v)
-    g = geometry.geometry_rows(az, el)
+    sources = c.gps_sources(az, el, v)
     if n_sops:
         tw = c.draw_sops(key, n_sops, params["d_min_m"], params["d_max_m"], params["h_min_m"],
                          params["h_max_m"])
-        x = c.concat_inputs(x, c.sop_inputs(tw.az_rad.shape, params["sigma_ura_sop_m"],
-                                            params["p_s_sop"], 1))
-        g = jnp.concatenate([g, geometry.geometry_rows(tw.az_rad, tw.el_rad)], -2)
+        sources = sources.concat(c.sop_sources(tw.az_rad, tw.el_rad, params["sigma_ura_sop_m"],
+                                               params["p_s_sop"], 1))
     p_const = jnp.array([c.P_CONST_GPS, params["p_const_sop"]])
-    return epoch, g, x, p_const
+    return epoch, sources, p_const
 
 
 class RiskCell:
@@ -126,13 +125,10 @@ class RiskCell:
         if g in self.cache:
             return self.cache[g]
         kg = mc.stream(key, "risk_geometry", g)
-        epoch, rows, x, p_const = geometry_inputs(kg, self.jtable, self.n_sops, self.p)
-        maps = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"],
-                               x["b_nom"], x["p_sat"], p_const, c.BUDGET, valid=x["valid"],
-                               max_order=self.max_order, fault_modes=self.p["fault_modes"])
-        t = ir.risk_table(maps, mc.stream(kg, "risk_table"), self.x,
-                          n_samples=self.p["samples"], ce_samples=self.p["ce_samples"],
-                          ce_rounds=self.p["ce_rounds"], nominal_bias=self.p["nominal_bias"])
+        epoch, sources, p_const = geometry_inputs(kg, self.jtable, self.n_sops, self.p)
+        maps = ir.monitor_maps(sources, p_const, c.BUDGET,
+                               araim.MHSSOptions(self.max_order, fault_modes=self.p["fault_modes"]))
+        t = ir.risk_table(maps, mc.stream(kg, "risk_table"), self.x, sampling(self.p))
         S, X = t.kind.size, self.X
         out = {k: np.zeros((self.S, X), np.dtype(v)) for k, v in outputs().items()}
         out["geometry"][:] = g
@@ -207,20 +203,24 @@ def geometry_zero_maps(params, key, n_sops, budget, max_order):
     the GPS epoch) under ``budget``."""
     jt = c.gps_sky_arrays(params["nav"], params["mask_deg"], params["sky_step_s"])
     kg = mc.stream(key, "risk_geometry", 0)
-    epoch, rows, x, p_const = geometry_inputs(kg, jt, n_sops, params)
-    m = ir.monitor_maps(rows, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"],
-                        x["p_sat"], p_const, budget, valid=x["valid"], max_order=max_order,
-                        fault_modes=params["fault_modes"])
-    return kg, x, m, epoch
+    epoch, sources, p_const = geometry_inputs(kg, jt, n_sops, params)
+    m = ir.monitor_maps(sources, p_const, budget,
+                        araim.MHSSOptions(max_order, fault_modes=params["fault_modes"]))
+    return kg, sources, m, epoch
+
+
+def sampling(params):
+    """The ``ir.Sampling`` of the study's parameters (importance sampling)."""
+    return ir.Sampling(params["samples"], params["ce_samples"], params["ce_rounds"],
+                       nominal_bias=params["nominal_bias"])
 
 
 def cross_check(params, key, crude_samples):
     """Weak budget, first geometry of the largest cell: IS against crude Monte Carlo on the
     fault-free and the worst single-satellite scenarios, with wall times (compiled first)."""
     _, x, m, _ = geometry_zero_maps(params, key, max(params["n_sops"]), WEAK_BUDGET, 1)
-    worst = int(np.argmax(np.abs(np.asarray(m.s0[2])) * np.asarray(x["valid"])))
-    opts = dict(n_samples=params["samples"], ce_samples=params["ce_samples"],
-                ce_rounds=params["ce_rounds"], nominal_bias=params["nominal_bias"])
+    worst = int(np.argmax(np.abs(np.asarray(m.s0[2])) * np.asarray(x.valid)))
+    opts = sampling(params)
     out = []
     for name, kind, src, d, xm in (("fault-free, vertical", ir.FAULT_FREE, -1, ir.VERTICAL, 0.0),
                                    ("largest-slope satellite at A_det, vertical", ir.SINGLE,
@@ -229,12 +229,13 @@ def cross_check(params, key, crude_samples):
                                     worst, ir.HORIZONTAL, 1.0)):
         k = mc.stream(key, "risk_cross_check", len(out))
         runs = {}
-        for mode, kw in (("is", opts), ("crude", dict(n_samples=crude_samples, crude=True,
-                                                      nominal_bias=params["nominal_bias"]))):
-            jax.block_until_ready(ir.scenario_estimate(m, kind, src, -1, d, xm, k, **kw))
+        scenario = ir.Scenario(kind, d, xm, source=src)
+        for mode, kw in (("is", opts), ("crude", ir.Sampling(
+                n_samples=crude_samples, crude=True, nominal_bias=params["nominal_bias"]))):
+            jax.block_until_ready(ir.scenario_estimate(m, scenario, k, kw))
             t0 = time.perf_counter()
             e = jax.block_until_ready(ir.scenario_estimate(
-                m, kind, src, -1, d, xm, mc.stream(k, "risk_rerun"), **kw))[2]
+                m, scenario, mc.stream(k, "risk_rerun"), kw))[2]
             runs[mode] = (float(e.p_md), float(e.se_md), int(e.hits_md),
                           time.perf_counter() - t0)
         (pi, si, _, ti), (pc, sc, hc, tc) = runs["is"], runs["crude"]
@@ -257,11 +258,9 @@ def sop_ramps(params, key, n_sops):
     for j in range(n_sops):
         pj, uj = [], []
         for d in (ir.HORIZONTAL, ir.VERTICAL):
-            r = ir.ramp_risk(m, first + j, d, params["ramp_rate_mps"],
-                             params["ramp_duration_s"], params["ramp_epoch_s"],
-                             mc.stream(kg, "risk_ramp", 2 * j + d),
-                             n_samples=params["samples"], ce_samples=params["ce_samples"],
-                             ce_rounds=params["ce_rounds"], nominal_bias=params["nominal_bias"])
+            r = ir.ramp_risk(m, ir.Ramp(first + j, d, params["ramp_rate_mps"],
+                                        params["ramp_duration_s"], params["ramp_epoch_s"]),
+                             mc.stream(kg, "risk_ramp", 2 * j + d), sampling(params))
             pj.append(r.p_md)
             uj.append(r.union_p_md)
             t = r.time_s

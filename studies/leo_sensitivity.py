@@ -127,18 +127,22 @@ def _sources(d, n, sigma, log10_p_s, p_const_leo, signal):
     return src, p_const
 
 
-@functools.partial(jax.jit, static_argnames=("max_order", "signal", "fault_modes"))
-def cell(d, keep, n, sigma, log10_p_s, p_const_leo, vpl0, hpl0, *, max_order, signal,
-         fault_modes):
+@functools.partial(jax.jit, static_argnames=("setup",))
+def cell(d, keep, n, sigma, priors, baseline, *, setup):
     """(mean VPL change, mean HPL change, share finite) over the realizations ``keep`` and
-    their derivatives in sigma (forward mode): one compiled program per order and signal."""
+    their derivatives in sigma (forward mode): one compiled program per order and signal.
+    ``priors``: (log10 P_s, P_const) of the LEO slots; ``baseline``: the GNSS-only (VPL, HPL)
+    (R,); ``setup``: the static (max_order, signal, fault_modes)."""
+    log10_p_s, p_const_leo = priors
+    vpl0, hpl0 = baseline
+    max_order, signal, fault_modes = setup
     budget = araim.BUDGET_LPV200
     rule = _rule(fault_modes)
 
     def f(s):
         src, pc = _sources(d, n, s, log10_p_s, p_const_leo, signal)
-        r = araim.protection_levels_kernel(src, pc, budget, max_order=max_order,
-                                           fault_modes=rule)
+        r = araim.protection_levels_kernel(src, pc, budget,
+                                           araim.MHSSOptions(max_order, fault_modes=rule))
         both = keep & jnp.isfinite(r.vpl_m) & jnp.isfinite(r.hpl_m) & jnp.isfinite(vpl0) \
             & jnp.isfinite(hpl0)
         m = jnp.where(jnp.sum(both) > 0, jnp.sum(both), jnp.nan)  # no user: NaN, not 0
@@ -156,8 +160,8 @@ def cell(d, keep, n, sigma, log10_p_s, p_const_leo, vpl0, hpl0, *, max_order, si
 def gnss_only(d, p_const_leo, *, signal, fault_modes):
     """VPL and HPL (R,) of GNSS alone (every LEO slot unused)."""
     src, pc = _sources(d, 0, jnp.float64(1.0), jnp.float64(-5.0), p_const_leo, signal)
-    r = araim.protection_levels_kernel(src, pc, araim.BUDGET_LPV200, max_order=1,
-                                       fault_modes=_rule(fault_modes))
+    r = araim.protection_levels_kernel(src, pc, araim.BUDGET_LPV200,
+                                       araim.MHSSOptions(1, fault_modes=_rule(fault_modes)))
     return r.vpl_m, r.hpl_m
 
 
@@ -215,9 +219,8 @@ def grid_and_boundary(ctx, ng, params):
         order = order_for(ng, n, p, params["p_const_leo"], params["fault_modes"])
 
         def ev(s, p=p, order=order):
-            v, dvl = cell(d, keep, n, jnp.float64(s), jnp.float64(np.log10(p)), pcl, vpl0,
-                          hpl0, max_order=order, signal=signal,
-                          fault_modes=params["fault_modes"])
+            v, dvl = cell(d, keep, n, jnp.float64(s), (jnp.float64(np.log10(p)), pcl),
+                          (vpl0, hpl0), setup=(order, signal, params["fault_modes"]))
             return np.asarray(v), np.asarray(dvl)
 
         for b, s in enumerate(sig):

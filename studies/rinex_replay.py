@@ -76,7 +76,7 @@ from oaraim.studies.common.rinex_files import (
     parse_paths,
 )
 from oaraim.studies.common.seed004 import B_NOM_GPS, P_CONST_GPS_PARAM, P_SAT_GPS
-from oaraim.studies.common.stanford import draw_stanford, stanford_counts
+from oaraim.studies.common.stanford import StanfordLabels, draw_stanford, stanford_counts
 
 DEFAULT_OBS = "obs/07590920.05o"
 DEFAULT_NAV = "obs/07590920.05n"
@@ -289,11 +289,11 @@ def replay_blocks(inp, truth, params, max_order, progress=None):
         idx = np.minimum(np.arange(start, start + BLOCK_EPOCHS), n_t - 1)
         n = min(BLOCK_EPOCHS, n_t - start)
         r = snapshot.replay(
-            c["pseudorange_m"][idx], c["tx_pos_m"][idx], c["var_int_m2"][idx],
-            c["var_acc_m2"][idx], v_c[idx], truth, correction_m=c["correction_m"][idx],
-            constellation=c["constellation"][idx], p_const=p_const, p_sat=c["p_sat"][idx],
-            b_nom_m=c["b_nom_m"][idx],
-            x0_m=x0[idx], config=snapshot.ReplayConfig(
+            c["pseudorange_m"][idx], c["tx_pos_m"][idx], snapshot.ReplaySources(
+                c["var_int_m2"][idx], c["var_acc_m2"][idx], v_c[idx],
+                constellation=c["constellation"][idx], p_sat=c["p_sat"][idx],
+                b_nom_m=c["b_nom_m"][idx]), truth, p_const=p_const,
+            correction_m=c["correction_m"][idx], x0_m=x0[idx], config=snapshot.ReplayConfig(
                 budget=REPLAY_BUDGETS[params["budget"]], p_fa=params["p_fa"], p_md=params["p_md"],
                 max_order=max_order, fault_modes=params["fault_modes"]))
         sl = slice(start, start + n)
@@ -436,13 +436,12 @@ class RinexReplay(Study):
         if table is not None:
             gps = araim.Ism(params["sigma_ura_m"], None, params["b_nom_m"], params["p_sat"],
                             params["p_const"])
-            inp = dual_replay.dual_inputs(table, nav_path, mask_deg=params["mask_deg"],
-                                          isms=(gps, dual_replay.parse_ism(
-                                              "galileo_ism", params["galileo_ism"])),
-                                          airborne_model=params["airborne_model"],
-                                          gps_pair=params["gps_pair"], tropo=params["tropo"],
-                                          single=params["signals"] == "single",
-                                          systems=SYSTEMS_OF[params["constellations"]])
+            inp = dual_replay.dual_inputs(table, nav_path, dual_replay.DualUser(
+                mask_deg=params["mask_deg"],
+                isms=(gps, dual_replay.parse_ism("galileo_ism", params["galileo_ism"])),
+                airborne_model=params["airborne_model"], gps_pair=params["gps_pair"],
+                tropo=params["tropo"], single=params["signals"] == "single",
+                systems=SYSTEMS_OF[params["constellations"]]))
             obs = obs._replace(sv=inp["sv"])
             raw = [s for s in inp["sv"][np.isnan(inp["l5_offset_m"])
                                         & (inp["combination"] == 1).any(0)]]
@@ -614,9 +613,9 @@ class RinexReplay(Study):
                                                 ("slope", "slope RAIM")), strict=True):
                 draw_stanford(fig, axx, ds[f"{err}_{kind}_m"].values,
                               ds[f"{pl}_{kind}_m"].values, al, counts[f"{kind}_{name}"],
-                              error_label=f"{err.upper()} (m)", pl_label=f"{pl.upper()} (m)",
-                              title=f"{name}, {label}; {'HAL' if lim == 'hal_m' else 'VAL'} "
-                                    f"{al:g} m")
+                              StanfordLabels(f"{err.upper()} (m)", f"{pl.upper()} (m)",
+                                             f"{name}, {label}; "
+                                             f"{'HAL' if lim == 'hal_m' else 'VAL'} {al:g} m"))
         fig.suptitle(f"Stanford diagrams, {a['obs_file']} ({a['code']}, {len(ds['epoch'])} "
                      f"epochs; truth: {a['truth_source']})", fontsize=9)
         p = f"{out_dir}/stanford_diagram.png"

@@ -42,6 +42,7 @@ from oaraim.studies.base import (
     probability,
 )
 from oaraim.studies.common import params as shared
+from oaraim.studies.common.towers import BppAnnulus
 
 HPL_GRID_M = np.round(np.arange(0.0, 500.0 + 1e-9, 0.01), 2)
 
@@ -60,11 +61,12 @@ def draw(key, n_gps, n_added, mask_rad, d_min_m, d_max_m, h_min_m, h_max_m):
 
 
 @functools.partial(jax.jit, static_argnames=("n_gps", "n_added"))
-def fig4_kernel(keys, n_gps, n_added, mask_rad, sigma_gps_m, sigma_sop_m, d_min_m, d_max_m,
-                h_min_m, h_max_m):
-    """Per realization: slope_max (metres per sqrt(lambda)) and status of both configurations."""
+def fig4_kernel(keys, n_gps, n_added, mask_rad, sigma_m, annulus: BppAnnulus):
+    """Per realization: slope_max (metres per sqrt(lambda)) and status of both configurations.
+    ``sigma_m``: (GPS, SOP) pseudorange sigmas (m); ``annulus``: where the towers are drawn."""
+    sigma_gps_m, sigma_sop_m = sigma_m
     az, el, az_g, el_g, az_s, el_s = jax.vmap(
-        lambda k: draw(k, n_gps, n_added, mask_rad, d_min_m, d_max_m, h_min_m, h_max_m))(keys)
+        lambda k: draw(k, n_gps, n_added, mask_rad, *annulus))(keys)
     g_gnss = geometry.geometry_rows(jnp.concatenate([az, az_g], -1),
                                     jnp.concatenate([el, el_g], -1))
     g_sop = geometry.geometry_rows(jnp.concatenate([az, az_s], -1),
@@ -141,9 +143,9 @@ class Fig4HplCdf(Study):
         means = {k: Mean(f"hpl_{k}_m") for k in ("gnss", "sop", "reduction")}
         kernel = functools.partial(
             fig4_kernel, n_gps=params["n_gps"], n_added=params["n_added"],
-            mask_rad=np.deg2rad(params["mask_deg"]), sigma_gps_m=params["sigma_gps_m"],
-            sigma_sop_m=params["sigma_sop_m"], d_min_m=params["d_min_m"],
-            d_max_m=params["d_max_m"], h_min_m=params["h_min_m"], h_max_m=params["h_max_m"])
+            mask_rad=np.deg2rad(params["mask_deg"]),
+            sigma_m=(params["sigma_gps_m"], params["sigma_sop_m"]),
+            annulus=BppAnnulus.of(params))
 
         def on_chunk(start, out):
             hpl = {k: out[f"slope_max_{k}"] * scale for k in ("gnss", "sop")}

@@ -52,6 +52,7 @@ from oaraim.studies.base import (
 )
 from oaraim.studies.common import params as shared
 from oaraim.studies.common.sky import file_day_start, parse_nav, resolve_sky
+from oaraim.studies.common.towers import BppAnnulus
 
 MDSCC_ECEF_M = (4849210.0, -360329.7, 4114920.0)  # DESIGN.md: seed 001 with y corrected
 VILL_FILE = "nav/VILL00ESP_R_20181700000_01D_MN.rnx.gz"
@@ -122,12 +123,15 @@ def _epoch_keys_fn(n_draws):
 
 
 @functools.partial(jax.jit, static_argnames=("n_sops",))
-def fig5_kernel(keys, az_gps, el_gps, valid_gps, lambda_table, n_sops, sigma_gps_m, sigma_sop_m,
-                d_min_m, d_max_m, h_min_m, h_max_m):
+def fig5_kernel(keys, sky, lambda_table, n_sops, sigma_m, annulus: BppAnnulus):
     """Per epoch (E,) the GPS-only HPL and per draw (E, N) the GPS + SOP HPL.
 
-    keys ``(E, N)``; GPS sky ``(E, L)`` padded with ``valid_gps``.
+    keys ``(E, N)``; ``sky`` the GPS (az, el, valid) ``(E, L)`` padded with valid; ``sigma_m``
+    the (GPS, SOP) pseudorange sigmas (m); ``annulus`` where the towers are drawn.
     """
+    az_gps, el_gps, valid_gps = sky
+    sigma_gps_m, sigma_sop_m = sigma_m
+    d_min_m, d_max_m, h_min_m, h_max_m = annulus
     e_n = keys.shape
     g_gps = geometry.geometry_rows(az_gps, el_gps)  # (E, L, 3)
     sig_gps = jnp.full(valid_gps.shape, sigma_gps_m)
@@ -150,14 +154,13 @@ BLOCK_EPOCHS = 16
 
 
 @functools.partial(jax.jit, static_argnames=("n_sops",))
-def fig5_blocks(keys, az_gps, el_gps, valid_gps, lambda_table, n_sops, sigma_gps_m,
-                sigma_sop_m, d_min_m, d_max_m, h_min_m, h_max_m):
-    """``fig5_kernel`` mapped (``lax.map``) over blocks: keys ``(B, BLOCK_EPOCHS, N)``."""
+def fig5_blocks(keys, sky, lambda_table, n_sops, sigma_m, annulus: BppAnnulus):
+    """``fig5_kernel`` mapped (``lax.map``) over blocks: keys ``(B, BLOCK_EPOCHS, N)``, the sky
+    arrays ``(B, BLOCK_EPOCHS, L)``."""
     def body(args):
         k, a, e, v = args
-        return fig5_kernel(k, a, e, v, lambda_table, n_sops, sigma_gps_m, sigma_sop_m,
-                           d_min_m, d_max_m, h_min_m, h_max_m)
-    return jax.lax.map(body, (keys, az_gps, el_gps, valid_gps))
+        return fig5_kernel(k, (a, e, v), lambda_table, n_sops, sigma_m, annulus)
+    return jax.lax.map(body, (keys, *sky))
 
 
 def threshold_sensitivity(hpl_m, threshold_m, step_s, rel=0.1):
@@ -276,10 +279,9 @@ class Fig5Madrid24h(Study):
             idx = np.minimum(idx, n_t - 1)  # pad the last call with the last epoch (trimmed)
             keys = keys_fn(seed_key, jnp.asarray(idx, jnp.uint32))
             blk = lambda x: x.reshape(n_blocks, BLOCK_EPOCHS, *x.shape[1:])  # noqa: E731
-            g, s = fig5_blocks(blk(keys), blk(az[idx]), blk(el[idx]), blk(valid[idx]), table,
-                               n_sops, params["sigma_gps_m"], params["sigma_sop_m"],
-                               params["d_min_m"], params["d_max_m"], params["h_min_m"],
-                               params["h_max_m"])
+            g, s = fig5_blocks(blk(keys), (blk(az[idx]), blk(el[idx]), blk(valid[idx])),
+                               table, n_sops, (params["sigma_gps_m"], params["sigma_sop_m"]),
+                               BppAnnulus.of(params))
             n = min(per_call, n_t - start)
             g = np.asarray(g).reshape(per_call)[:n]
             s = np.asarray(s).reshape(per_call, n_draws)[:n]

@@ -215,9 +215,9 @@ class Seed001Vehicle(Study):
             for ci, sop in enumerate((False, True)):
                 use = geom.valid & (geom.is_gps | sop)[None]
                 r = snapshot.replay(
-                    pr.reshape(-1, n_l), rows(geom.tx_pos_m), var_int, var_int,
-                    rows(use), rows(geom.truth_m), correction_m=rows(corr),
-                    slope_sigma_m=sig_model, x0_m=x0,
+                    pr.reshape(-1, n_l), rows(geom.tx_pos_m), snapshot.ReplaySources(
+                        var_int, var_int, rows(use), slope_sigma_m=sig_model),
+                    rows(geom.truth_m), correction_m=rows(corr), x0_m=x0,
                     config=snapshot.ReplayConfig(monitors=("slope",), p_fa=params["p_fa"],
                                                  p_md=params["p_md"]))
                 hpl = np.asarray(r.slope.hpl_all_in_view_m).reshape(ids.size, n_t)[:nb]

@@ -34,7 +34,7 @@ import numpy as np
 import xarray as xr
 
 from oaraim import geometry
-from oaraim.araim import Sources, Status, fault_mode_rule, separation_kernel
+from oaraim.araim import MHSSOptions, Sources, Status, fault_mode_rule, separation_kernel
 from oaraim.batching import jit_kernel
 from oaraim.errors import gnss_variances, sop_variances
 from oaraim.mc import Count, Max, Mean, Min
@@ -88,7 +88,7 @@ def draw(key, n_gps):
 def _sep(x, valid, fault_modes):
     return separation_kernel(Sources(x["g"], x["constellation"], x["var_int"], x["var_acc"],
                                      x["b_nom"], x["p_sat"], valid), x["p_const"], c.BUDGET,
-                             x["y"], max_order=1, fault_modes=fault_mode_rule(fault_modes))
+                             x["y"], MHSSOptions(1, fault_modes=fault_mode_rule(fault_modes)))
 
 
 @functools.partial(jit_kernel, static_argnames=("fault_modes",))

@@ -29,7 +29,6 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
-from oaraim import geometry
 from oaraim.batching import jit_kernel
 from oaraim.mc import realization_keys
 from oaraim.mc.checkpoint import counted_unit
@@ -53,12 +52,9 @@ def mean_sop_hpl(hpl_gps_m, gps, sops, sigma_ura_sop_m, log10_p_s, p_const_sop, 
     draws' (az, el, valid) (R, S), ``sops`` their towers' (az, el, valid) (R, N) padded to a
     common N (``padded_towers``: absent towers are invalid sources, which change no PL)."""
     (az, el, v), (az_s, el_s, valid_s) = gps, sops
-    x = c.concat_inputs(c.gps_inputs(el, v),
-                        {**c.sop_inputs(az_s.shape, sigma_ura_sop_m, 10.0 ** log10_p_s, 1),
-                         "valid": valid_s})
-    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)],
-                        -2)
-    hs, _, _, _, _ = c.mhss(g, x, jnp.stack([jnp.float64(c.P_CONST_GPS), p_const_sop]),
+    sources = c.gps_sources(az, el, v).concat(
+        c.sop_sources(az_s, el_s, sigma_ura_sop_m, 10.0 ** log10_p_s, 1, valid_s))
+    hs, _, _, _, _ = c.mhss(sources, jnp.stack([jnp.float64(c.P_CONST_GPS), p_const_sop]),
                             max_order, fault_modes)
     both = jnp.isfinite(hs) & jnp.isfinite(hpl_gps_m)
     hs0 = jnp.where(both, hs, 0.0)

@@ -147,11 +147,9 @@ def region_hpls(towers, tower_valid, receivers, sky, sop):
     gaz, gel, gvalid = (jnp.broadcast_to(jnp.asarray(sky[k]), (*b, n_s)).reshape(-1, n_s)
                         for k in ("az_rad", "el_rad", "valid"))
     sigma, p_s, p_const = sop
-    x = c.concat_inputs(c.gps_inputs(gel, gvalid),
-                        {**c.sop_inputs(az_t.shape, sigma, p_s, 1), "valid": valid_t})
-    g = jnp.concatenate([geometry.geometry_rows(gaz, gel), geometry.geometry_rows(az_t, el_t)],
-                        -2)
-    hpl, _, _, _, _ = c.mhss(g, x, jnp.array([c.P_CONST_GPS, p_const]), 1)
+    sources = c.gps_sources(gaz, gel, gvalid).concat(
+        c.sop_sources(az_t, el_t, sigma, p_s, 1, valid_t))
+    hpl, _, _, _, _ = c.mhss(sources, jnp.array([c.P_CONST_GPS, p_const]), 1)
     return hpl.reshape(n_p, n_r * n_e)
 
 

@@ -21,7 +21,7 @@ from oaraim.errors import (
 from oaraim.execute import RunOptions, run_study
 from oaraim.geometry.sky import line_of_sight, look_angles
 from oaraim.readers import GALILEO
-from oaraim.reference_mhss import protection_levels_reference
+from oaraim.reference_mhss import ReferenceOptions, protection_levels_reference
 from oaraim.registry import STUDIES
 from oaraim.studies import availability_map as am
 from oaraim.studies.availability_map import slots
@@ -161,8 +161,8 @@ def test_max_visible_counts_what_look_angles_counts(shared_data, monkeypatch):
             p["lon_deg"])), 0.0, ecef, ok, np.tan(mask - 0.05))) == int(maybe)
         differ += int(sure) != int(maybe)
     assert differ > 0  # the wide margin sends rows to the exact count
-    args = (p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"], p["lat_deg"],
-            p["lon_deg"], p["height_m"], p["sky_time"])
+    args = (am.OrbitWindow(p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["sky_time"]),
+            p["mask_deg"], p["lat_deg"], p["lon_deg"], p["height_m"])
     am.max_visible.cache_clear()
     assert am.max_visible(*args) == want
     monkeypatch.setattr(slots, "_MASK_MARGIN_RAD", 0.05)
@@ -244,14 +244,14 @@ def test_every_pl_matches_the_numpy_oracle(small):
                                                                     user_model=user))
                 vi_e, va_e = (np.asarray(x) for x in gnss_variances(e, p["sigma_ura_gal_m"],
                                                                     user_model=user))
+                sources = (np.asarray(geometry.geometry_rows(az[k][v], e)), cons[v],
+                           np.where(gal, vi_e, vi_g), np.where(gal, va_e, va_g),
+                           np.where(gal, p["b_nom_gal_m"], p["b_nom_gps_m"]),
+                           np.where(gal, p["p_sat_gal"], p["p_sat_gps"]), None)
                 ref = protection_levels_reference(
-                    np.asarray(geometry.geometry_rows(az[k][v], e)), cons[v],
-                    np.where(gal, vi_e, vi_g), np.where(gal, va_e, va_g),
-                    np.where(gal, p["b_nom_gal_m"], p["b_nom_gps_m"]),
-                    np.where(gal, p["p_sat_gal"], p["p_sat_gps"]), lay["p_const"],
-                    lay["level"].budget, max_order=lay["max_order"],
-                    fault_modes=p["fault_modes"],
-                    position_optimization=lay["position_optimization"])
+                    sources, lay["p_const"], lay["level"].budget, ReferenceOptions(
+                        max_order=lay["max_order"], fault_modes=p["fault_modes"],
+                        position_optimization=lay["position_optimization"]))
                 got = [ds[n].values[i, j, k] for n in ("hpl_m", "vpl_m", "emt_m",
                                                        "sigma_acc_m")]
                 want = [ref.hpl_m, ref.vpl_m, ref.emt_m, ref.sigma_acc_u_m]

@@ -36,8 +36,9 @@ def case():
 
 
 def _pl(x, n, **kw):
-    return araim.protection_levels(*(x[k][:n] for k in KEYS[:7]), BUDGET, x["valid"][:n],
-                                   fault_modes="grouped", **kw)
+    return araim.protection_levels(araim.Sources(*(x[k][:n] for k in KEYS[:6]), x["valid"][:n]),
+                                   x["p_const"][:n], BUDGET,
+                                   araim.MHSSOptions(fault_modes="grouped", **kw))
 
 
 def test_batches_of_one_bucket_share_one_program_and_bits(case):
@@ -51,21 +52,23 @@ def test_batches_of_one_bucket_share_one_program_and_bits(case):
         for name, a, b in zip(got._fields, got, full, strict=True):
             assert a.shape[0] == n and np.array_equal(np.asarray(a), np.asarray(b)[:n]), name
     assert mhss.kernel_cache_size() - before <= 1
-    two_d = araim.protection_levels(*(case[k][:12].reshape((3, 4) + case[k].shape[1:])
-                                      for k in KEYS[:7]), BUDGET,
-                                    case["valid"][:12].reshape(3, 4, -1), max_order=1,
-                                    fault_modes="grouped")
+    def three_by_four(x):
+        return x[:12].reshape((3, 4) + x.shape[1:])
+
+    one = araim.MHSSOptions(1, fault_modes="grouped")
+    two_d = araim.protection_levels(
+        araim.Sources(*(three_by_four(case[k]) for k in KEYS[:6]), three_by_four(case["valid"])),
+        three_by_four(case["p_const"]), BUDGET, one)
     assert two_d.hpl_m.shape == (3, 4)
     assert np.array_equal(np.asarray(two_d.hpl_m).ravel(), np.asarray(full.hpl_m)[:12])
     bad = case["var_acc_m2"][:12].reshape(3, 4, -1).copy()
     bad[2, 1, 5] = np.nan  # named by its place in the caller's batch, not in the flat one
     with pytest.raises(ValueError, match=r"var_acc_m2 .* batch index \(2, 1\), source 5"):
-        araim.protection_levels(*(case[k][:12].reshape((3, 4) + case[k].shape[1:])
-                                  for k in KEYS[:3]), bad,
-                                *(case[k][:12].reshape((3, 4) + case[k].shape[1:])
-                                  for k in KEYS[4:7]), BUDGET,
-                                case["valid"][:12].reshape(3, 4, -1), max_order=1,
-                                fault_modes="grouped")
+        araim.protection_levels(
+            araim.Sources(*(three_by_four(case[k]) for k in KEYS[:3]), bad,
+                          *(three_by_four(case[k]) for k in KEYS[4:6]),
+                          three_by_four(case["valid"])),
+            three_by_four(case["p_const"]), BUDGET, one)
 
 
 def test_max_order_none_in_one_call_equals_the_explicit_order(case):

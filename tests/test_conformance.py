@@ -55,10 +55,12 @@ def add_example(p_sat, rule, max_order=None, budget=araim.BUDGET_LPV200):
     L = ADD_ROWS.shape[0]
     args = (ADD_ROWS, ADD_CONST, ADD_C_INT, ADD_C_ACC, np.full(L, ADD_B_NOM_M),
             np.full(L, p_sat), ADD_P_CONST)
-    res = araim.protection_levels(*(a[None] for a in args), budget, max_order=max_order,
-                                  fault_modes=rule)
-    oracle = ref.protection_levels_reference(*args, budget, max_order=max_order or 2,
-                                             fault_modes=rule)
+    a = [x[None] for x in args]
+    res = araim.protection_levels(araim.Sources(*a[:6]), a[6], budget,
+                                  araim.MHSSOptions(max_order, fault_modes=rule))
+    oracle = ref.protection_levels_reference(araim.Sources(*args[:6]), args[6], budget,
+                                             ref.ReferenceOptions(max_order=max_order or 2,
+                                                                  fault_modes=rule))
     return {k: np.asarray(v)[0] for k, v in res._asdict().items()}, oracle
 
 
@@ -239,14 +241,14 @@ def test_event_conventions_match_the_oracle(event_cases, rule, order):
     both are OK (the PLs: the kernel's root within 1e-4 m above, the oracle's bisection within
     1e-6 m: 2e-3 m as test_mhss.py), same status, modes, order and P_NM."""
     g, const, vi, va, b, ps, pc, valid = event_cases
-    res = araim.protection_levels(g, const, vi, va, b, ps, pc, araim.BUDGET_LPV200, valid,
-                                  max_order=order, fault_modes=rule)
+    res = araim.protection_levels(araim.Sources(g, const, vi, va, b, ps, valid), pc,
+                                  araim.BUDGET_LPV200, araim.MHSSOptions(order, fault_modes=rule))
     res = {k: np.asarray(v) for k, v in res._asdict().items()}
     compared = pairs = 0
     for i in range(g.shape[0]):
-        o = ref.protection_levels_reference(g[i], const[i], vi[i], va[i], b[i], ps[i], pc[i],
-                                            araim.BUDGET_LPV200, valid[i], max_order=order,
-                                            fault_modes=rule)
+        o = ref.protection_levels_reference(araim.Sources(g[i], const[i], vi[i], va[i], b[i], ps[i],
+                                                          valid[i]), pc[i], araim.BUDGET_LPV200,
+                                            ref.ReferenceOptions(max_order=order, fault_modes=rule))
         if o.borderline:
             continue
         assert res["status"][i] == o.status, i
@@ -317,14 +319,15 @@ def test_position_optimization_matches_the_oracle(event_cases):
     opt = OPT_ALWAYS
     g, const, vi, va, b, ps, pc, valid = event_cases
     kw = dict(max_order=2, fault_modes="add-v4.2")
-    res = araim.protection_levels(g, const, vi, va, b, ps, pc, araim.BUDGET_LPV200, valid,
-                                  position_optimization=opt, **kw)
+    res = araim.protection_levels(araim.Sources(g, const, vi, va, b, ps, valid), pc,
+                                  araim.BUDGET_LPV200,
+                                  araim.MHSSOptions(position_optimization=opt, **kw))
     res = {k: np.asarray(v) for k, v in res._asdict().items()}
     adjusted = compared = 0
     for i in range(g.shape[0]):
-        o = ref.protection_levels_reference(g[i], const[i], vi[i], va[i], b[i], ps[i], pc[i],
-                                            araim.BUDGET_LPV200, valid[i],
-                                            position_optimization=opt, **kw)
+        o = ref.protection_levels_reference(
+            (g[i], const[i], vi[i], va[i], b[i], ps[i], valid[i]), pc[i], araim.BUDGET_LPV200,
+            ref.ReferenceOptions(position_optimization=opt, **kw))
         if o.borderline or o.status != Status.OK:
             continue
         compared += 1
@@ -347,8 +350,8 @@ def test_position_optimization_compact_subbatch_keeps_the_bits(event_cases, monk
     x = [np.concatenate([a, a[:16]]) for a in event_cases]  # 64 geometries: one chunk
     x[-1][10:] = False  # all but 10 without sources: at most 10 trigger
     flat, _ = host_inputs(*x)
-    static = dict(budget=araim.BUDGET_LPV200, max_order=2,
-                  fault_modes=FaultModeRule("add-v4.2"), position_optimization=OPT_ALWAYS)
+    static = dict(budget=araim.BUDGET_LPV200, options=araim.MHSSOptions(
+        2, fault_modes=FaultModeRule("add-v4.2"), position_optimization=OPT_ALWAYS).checked())
 
     def run():  # a new function: traced afresh with the module's current sub-batch limit
         return jax.jit(lambda *a: entry._protection_levels(*a, **static))(*flat)
@@ -372,26 +375,31 @@ def test_position_optimization_by_hand():
     var = ADD_C_INT
     args = (ADD_ROWS, ADD_CONST, var, var, np.full(L, ADD_B_NOM_M), np.full(L, 1e-5),
             ADD_P_CONST)
-    base = ref.protection_levels_reference(*args, araim.BUDGET_LPV200, max_order=1,
-                                           fault_modes="add-v4.2")
+    base = ref.protection_levels_reference(araim.Sources(*args[:6]), args[6],
+                                           araim.BUDGET_LPV200,
+                                           ref.ReferenceOptions(1, fault_modes="add-v4.2"))
     weak = max((m for m in base.monitored if m.mode.prior >= 1e-11), key=lambda m: m.sigma[2])
     limit = base.sigma_acc_u_m + 0.2
     t = np.sqrt((limit - 1e-5) ** 2 - base.sigma_acc_u_m ** 2) / weak.sigma_ss[2]
     assert 0 < t < 1
     opt = araim.PositionOptimization(sigma_acc_max_m=(3.0, 3.0, limit), keep="always")
-    res = araim.protection_levels(*(a[None] for a in args), araim.BUDGET_LPV200,
-                                  fault_modes="add-v4.2", position_optimization=opt)
+    a = [x[None] for x in args]
+    res = araim.protection_levels(araim.Sources(*a[:6]), a[6], araim.BUDGET_LPV200,
+                                  araim.MHSSOptions(fault_modes="add-v4.2",
+                                                    position_optimization=opt))
     assert float(res.sigma_acc_u_m[0]) == pytest.approx(limit - 1e-5, abs=1e-9)
     # the vertical separation of the weak mode shrinks by the factor (1 - t)
-    adj = ref.protection_levels_reference(*args, araim.BUDGET_LPV200, max_order=1,
-                                          fault_modes="add-v4.2", position_optimization=opt)
+    adj = ref.protection_levels_reference(araim.Sources(*args[:6]), args[6], araim.BUDGET_LPV200,
+                                          ref.ReferenceOptions(max_order=1, fault_modes="add-v4.2",
+                                                               position_optimization=opt))
     moved = next(m for m in adj.monitored if m.mode == weak.mode)
     assert moved.sigma_ss[2] == pytest.approx((1 - t) * weak.sigma_ss[2], rel=1e-9)
     # a limit below the WLS sigma_acc leaves the vertical row unchanged (t = 0): the oracle
     # here, the kernel in the MAAST case with row 2 out below (sigma_acc,U 2.076 > 1.86 m)
     tight = araim.PositionOptimization(sigma_acc_max_m=(3.0, 3.0, 1.0), keep="always")
-    same = ref.protection_levels_reference(*args, araim.BUDGET_LPV200, max_order=1,
-                                           fault_modes="add-v4.2", position_optimization=tight)
+    same = ref.protection_levels_reference(araim.Sources(*args[:6]), args[6], araim.BUDGET_LPV200,
+                                           ref.ReferenceOptions(max_order=1, fault_modes="add-v4.2",
+                                                                position_optimization=tight))
     assert same.sigma_acc_u_m == pytest.approx(base.sigma_acc_u_m, abs=1e-12)
 
 
@@ -414,9 +422,11 @@ def test_position_optimization_matches_maast_for_araim_2():
         args = (ADD_ROWS, ADD_CONST, ADD_C_INT, ADD_C_ACC, np.full(10, ADD_B_NOM_M),
                 np.full(10, r["p_sat"]), ADD_P_CONST, valid)
         for name, opt in (("adjusted", OPT_ALWAYS), ("maast", araim.PositionOptimization())):
-            res = araim.protection_levels(*(a[None] for a in args[:7]), araim.BUDGET_LPV200,
-                                          valid[None], max_order=2, fault_modes=rule,
-                                          position_optimization=opt)
+            a = [x[None] for x in args]
+            res = araim.protection_levels(araim.Sources(*a[:6], a[7]), a[6],
+                                          araim.BUDGET_LPV200,
+                                          araim.MHSSOptions(2, fault_modes=rule,
+                                                            position_optimization=opt))
             want = r[name]
             got = {k: float(np.asarray(getattr(res, k))[0])
                    for k in ("vpl_m", "hpl_m", "sigma_acc_u_m", "emt_m")}
@@ -469,8 +479,9 @@ def test_availability_map_geometries_match_maast_for_araim_2():
     req = av.SERVICE_LEVELS["lpv200"].requirements
     res = {}
     for name, opt in (("maast", araim.PositionOptimization()), ("maast_no_opt_no_target", None)):
-        r = araim.protection_levels(*args, budget, valid, max_order=1, fault_modes="add-v4.2",
-                                    position_optimization=opt)
+        r = araim.protection_levels(araim.Sources(*args[:6], valid), args[6], budget,
+                                    araim.MHSSOptions(1, fault_modes="add-v4.2",
+                                                      position_optimization=opt))
         res[name] = {k: np.asarray(getattr(r, k)) for k in ("vpl_m", "hpl_m", "emt_m",
                                                             "sigma_acc_u_m", "status",
                                                             "position_adjusted")}

@@ -38,15 +38,16 @@ def test_gnss_epoch_equals_the_route_by_hand(vill):
     compacted and the padded arrays differ in length, so in rounding only); ids are the
     file's names of the satellites in view."""
     t = T_10H + np.array([0.0, 600.0])
-    r = araim.epoch_protection_levels(*MADRID, t, vill, max_order=1)
+    r = araim.epoch_protection_levels(*MADRID, t, vill,
+                                      options=araim.EpochOptions(mhss=araim.MHSSOptions(1)))
     rx = geometry.geodetic_to_ecef(np.deg2rad(MADRID[0]), np.deg2rad(MADRID[1]), MADRID[2])
     s = geometry.sky(rx, t, vill, mask_deg=5.0)
     el = np.where(s.valid, s.el_rad, np.pi / 2)
     vi, va = gnss_variances(el, 1.0, user_model=sigma_user_ed259a_m)
-    by_hand = araim.protection_levels(
-        geometry.geometry_rows(s.az_rad, s.el_rad), s.constellation, vi, va, 0.75, 1e-5,
-        np.array([1e-8, 1e-4]), araim.BUDGET_LPV200, s.valid, max_order=1,
-        fault_modes="add-v4.2")
+    by_hand = araim.protection_levels(araim.Sources(geometry.geometry_rows(s.az_rad, s.el_rad),
+                                                    s.constellation, vi, va, 0.75, 1e-5, s.valid),
+                                      np.array([1e-8, 1e-4]), araim.BUDGET_LPV200,
+                                      araim.MHSSOptions(1, fault_modes="add-v4.2"))
     for k in ("hpl_m", "vpl_m", "emt_m", "sigma_acc_u_m"):
         np.testing.assert_allclose(getattr(r.pl, k), getattr(by_hand, k), atol=1e-4)
     np.testing.assert_array_equal(r.pl.status, by_hand.status)
@@ -67,14 +68,16 @@ def test_fifty_satellites_and_three_towers(vill):
     s = geometry.sky(rx, T_10H, vill)
     assert s.sv.size == 50
     with pytest.raises(ValueError, match="at most 52 sources"):
-        araim.protection_levels(np.zeros((53, 3)), np.zeros(53, int), np.ones(53), np.ones(53),
-                                0.0, 1e-5, np.full(4, 1e-4), araim.BUDGET_LPV200,
-                                fault_modes="add-v4.2", max_order=1)
-    r = araim.epoch_protection_levels(*MADRID, T_10H, vill, towers=TOWERS, max_order=2)
+        araim.protection_levels(araim.Sources(np.zeros((53, 3)), np.zeros(53, int), np.ones(53),
+                                              np.ones(53), 0.0, 1e-5), np.full(4, 1e-4),
+                                araim.BUDGET_LPV200, araim.MHSSOptions(1, fault_modes="add-v4.2"))
+    r = araim.epoch_protection_levels(*MADRID, T_10H, vill, TOWERS,
+                                      options=araim.EpochOptions(mhss=araim.MHSSOptions(2)))
     assert int(r.pl.status) == Status.OK and np.isfinite(r.pl.vpl_m)
     assert r.sources[-3:] == ("T1", "T2", "T3") and r.n_sources == len(r.sources) == 17
     assert r.constellations == ("GPS", "Galileo", "SOP A", "SOP B")
-    two = araim.epoch_protection_levels(*MADRID, T_10H, vill, towers=TOWERS[:2], max_order=2)
+    two = araim.epoch_protection_levels(*MADRID, T_10H, vill, TOWERS[:2],
+                                        options=araim.EpochOptions(mhss=araim.MHSSOptions(2)))
     assert int(two.pl.status) == Status.OK
     assert int(r.pl.n_modes) > int(two.pl.n_modes)
     assert float(r.pl.vpl_m) >= float(two.pl.vpl_m) - 2e-3  # a lone carrier adds no position
@@ -83,13 +86,20 @@ def test_fifty_satellites_and_three_towers(vill):
 def test_options_reach_the_levels(vill):
     """budget, mask, ISM and airborne model change what they should: a looser sigma_URA raises
     the VPL, a 20 deg mask drops satellites, the ADD curve differs from ED-259A."""
-    base = araim.epoch_protection_levels(*MADRID, T_10H, vill, max_order=1)
-    worse = araim.epoch_protection_levels(*MADRID, T_10H, vill, max_order=1,
-                                          ism={"gps": araim.Ism(sigma_ura_m=2.0)})
+    base = araim.epoch_protection_levels(*MADRID, T_10H, vill,
+                                         options=araim.EpochOptions(mhss=araim.MHSSOptions(1)))
+    loose = {"gps": araim.Ism(sigma_ura_m=2.0)}
+    worse = araim.epoch_protection_levels(*MADRID, T_10H, vill,
+                                          options=araim.EpochOptions(ism=loose,
+                                                                     mhss=araim.MHSSOptions(1)))
     assert float(worse.pl.vpl_m) > float(base.pl.vpl_m)
-    high = araim.epoch_protection_levels(*MADRID, T_10H, vill, max_order=1, mask_deg=20.0)
+    high = araim.epoch_protection_levels(*MADRID, T_10H, vill,
+                                         options=araim.EpochOptions(mask_deg=20.0,
+                                                                    mhss=araim.MHSSOptions(1)))
     assert high.n_sources < base.n_sources and min(high.el_deg) >= 20.0
-    add = araim.epoch_protection_levels(*MADRID, T_10H, vill, max_order=1, airborne_model="add")
+    add = araim.epoch_protection_levels(*MADRID, T_10H, vill,
+                                        options=araim.EpochOptions(airborne_model="add",
+                                                                   mhss=araim.MHSSOptions(1)))
     assert abs(float(add.pl.vpl_m) - float(base.pl.vpl_m)) > 0.01
 
 
@@ -105,8 +115,14 @@ def test_options_reach_the_levels(vill):
     (dict(fault_modes="add-v5"), "fault_modes must be"),
 ])
 def test_bad_input_is_one_line(kwargs, message):
+    kwargs = dict(kwargs)
+    opts = {k: kwargs.pop(k) for k in list(kwargs) if k in araim.EpochOptions._fields}
+    if "fault_modes" in kwargs:
+        opts["mhss"] = araim.MHSSOptions(fault_modes=kwargs.pop("fault_modes"))
     args = dict(lat_deg=MADRID[0], lon_deg=MADRID[1], h_m=MADRID[2], t_gps_s=0.0,
                 sky="nominal") | kwargs
+    if opts:
+        args["options"] = araim.EpochOptions(**opts)
     with pytest.raises(ValueError, match=message) as e:
         araim.epoch_protection_levels(**args)
     assert "\n" not in str(e.value)
@@ -136,13 +152,16 @@ def test_a_file_cut_short_is_refused(tmp_path, shared_data):
     t = gpstime.gps_seconds(2022, 1, 1) + 1800.0 * np.arange(48)
     with pytest.raises(ValueError, match=r"no usable orbits for most satellites at \d+ of 48 "
                        r"epochs .*allow_gaps=True") as e:
-        araim.epoch_protection_levels(*MADRID, t, str(cut), max_order=1)
+        araim.epoch_protection_levels(*MADRID, t, str(cut),
+                                      options=araim.EpochOptions(mhss=araim.MHSSOptions(1)))
     assert "\n" not in str(e.value)
-    r = araim.epoch_protection_levels(*MADRID, t, str(cut), max_order=1, allow_gaps=True)
+    r = araim.epoch_protection_levels(*MADRID, t, str(cut),
+                                      options=araim.EpochOptions(allow_gaps=True,
+                                                                 mhss=araim.MHSSOptions(1)))
     assert np.any(r.pl.status == Status.TOO_FEW_SOURCES) and np.any(r.pl.status == Status.OK)
     assert np.all(np.isinf(r.pl.vpl_m[r.pl.status == Status.TOO_FEW_SOURCES]))
     whole = araim.epoch_protection_levels(*MADRID, t, shared_data / "nav/brdc0010.22n",
-                                          max_order=1)
+                                          options=araim.EpochOptions(mhss=araim.MHSSOptions(1)))
     assert whole.n_sources.min() >= 5
 
 

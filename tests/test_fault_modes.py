@@ -8,7 +8,6 @@ float64: rounding ~1e-15).
 """
 
 import itertools
-from functools import partial
 
 import jax
 import numpy as np
@@ -21,12 +20,12 @@ from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.araim.fault_modes import fault_modes as _fault_modes_eager
 from oaraim.errors import gnss_variances, sop_variances
-from tests.test_mhss import random_cases
+from tests.test_mhss import grouped, random_cases
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-protection_levels = partial(araim.protection_levels, fault_modes="grouped")
-solution_separation = partial(araim.solution_separation, fault_modes="grouped")
+protection_levels = grouped(araim.protection_levels)
+solution_separation = grouped(araim.solution_separation)
 
 P_THRESH = 6e-8  # Table I
 #: jitted once per shape: eager dispatch of the mode template is slower than compiling it
@@ -213,10 +212,10 @@ def test_public_api_probabilities_close():
     (computed independently) = 1 within 1e-12 on every geometry with status OK or 5."""
     n = 128  # the shape of test_fde.py's separation test: one compilation for both
     case, _ = random_cases(20261125, n)
-    sep = solution_separation(
-        case["g"], case["constellation"], case["var_int"], case["var_acc"], case["b_nom"],
-        case["p_sat"], case["p_const"], araim.BUDGET_SEED004_TABLE_I, np.zeros((n, 28)),
-        valid=case["valid"], max_order=3)
+    sep = solution_separation(araim.Sources(case["g"], case["constellation"], case["var_int"],
+                                            case["var_acc"], case["b_nom"], case["p_sat"],
+                                            case["valid"]), case["p_const"],
+                              araim.BUDGET_SEED004_TABLE_I, np.zeros((n, 28)), araim.MHSSOptions(3))
     prior = np.asarray(sep.prior) * np.asarray(sep.monitored)
     status = np.asarray(sep.pl.status)
     checked = 0
@@ -262,9 +261,12 @@ def test_benchmark_configuration_has_15_modes():
     args, valid = _gps9_sops(4, 1e-4)
     fm = _np(fault_modes(valid, args[1], args[5], args[6], P_THRESH, 3))
     assert int(fm["order"]) == 1 and int(fm["live"].sum()) == 15
-    res = protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
+    res = protection_levels(araim.Sources(*args[:6], valid), args[6], araim.BUDGET_SEED004_TABLE_I,
+                            araim.MHSSOptions(3))
     assert int(res.order) == 1 and int(res.n_modes) == 15 and int(res.status) == Status.OK
-    o = ref.protection_levels_reference(*args, araim.BUDGET_SEED004_TABLE_I, valid, 3)
+    o = ref.protection_levels_reference(araim.Sources(*args[:6], valid), args[6],
+                                        araim.BUDGET_SEED004_TABLE_I,
+                                        ref.ReferenceOptions(max_order=3))
     assert o.n_modes == 15 and not o.singular
     assert float(res.hpl_m) == pytest.approx(o.hpl_m, abs=2e-3)
 
@@ -277,9 +279,12 @@ def test_high_sop_fault_probability_needs_order_2():
     args, valid = _gps9_sops(8, 0.1)
     fm = _np(fault_modes(valid, args[1], args[5], args[6], P_THRESH, 3))
     assert int(fm["order"]) == 2 and int(fm["live"].sum()) == 37
-    res = protection_levels(*args, araim.BUDGET_SEED004_TABLE_I, valid=valid, max_order=3)
+    res = protection_levels(araim.Sources(*args[:6], valid), args[6], araim.BUDGET_SEED004_TABLE_I,
+                            araim.MHSSOptions(3))
     assert int(res.order) == 2 and int(res.n_modes) == 36
-    o = ref.protection_levels_reference(*args, araim.BUDGET_SEED004_TABLE_I, valid, 3)
+    o = ref.protection_levels_reference(araim.Sources(*args[:6], valid), args[6],
+                                        araim.BUDGET_SEED004_TABLE_I,
+                                        ref.ReferenceOptions(max_order=3))
     assert o.order == 2 and len(o.fault_modes.modes) == 37 and o.n_modes == 36
     assert [m.constellations for m in o.singular] == [(0, 1)]
     assert int(res.status) == o.status

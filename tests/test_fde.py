@@ -10,7 +10,6 @@ Compiled shapes: L = 18 (12 GPS + 6 SOP slots), C = 2, order 1 for the FDE cases
 random set of test_mhss.py for the separation-vs-oracle test.
 """
 
-from functools import partial
 
 import jax
 import numpy as np
@@ -20,13 +19,13 @@ from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.errors import gnss_variances, sop_variances
-from tests.test_mhss import random_cases
+from tests.test_mhss import grouped, random_cases
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-protection_levels = partial(araim.protection_levels, fault_modes="grouped")
-detect_and_exclude = partial(araim.detect_and_exclude, fault_modes="grouped")
-solution_separation = partial(araim.solution_separation, fault_modes="grouped")
+protection_levels = grouped(araim.protection_levels)
+detect_and_exclude = grouped(araim.detect_and_exclude)
+solution_separation = grouped(araim.solution_separation)
 
 L_GPS, L_SOP = 12, 6
 L = L_GPS + L_SOP
@@ -64,8 +63,11 @@ def fde_cases(seed, n, n_sop_range=(2, 3)):
                 p_const=np.broadcast_to([1e-8, 1e-5], (n, 2)).copy(), valid=valid), rng
 
 
-def _args(c, y):
-    return (c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"], c["p_sat"],
+def _args(c, y, valid=None):
+    """(sources, p_const, budget, residuals) of the host functions; ``valid`` overrides the
+    case's."""
+    return (araim.Sources(c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"],
+                          c["p_sat"], c["valid"] if valid is None else valid),
             c["p_const"], araim.BUDGET_SEED004_TABLE_I, y)
 
 
@@ -81,9 +83,9 @@ def _np(res):
 
 
 def _ref_args(c, i, y, max_order=1):
-    return (c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i], c["b_nom"][i],
-            c["p_sat"][i], c["p_const"][i], araim.BUDGET_SEED004_TABLE_I, y, c["valid"][i],
-            max_order)
+    return (araim.Sources(c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i],
+                          c["b_nom"][i], c["p_sat"][i], c["valid"][i]),
+            c["p_const"][i], araim.BUDGET_SEED004_TABLE_I, y, ref.ReferenceOptions(max_order))
 
 
 def _modes(excluded, monitored):
@@ -122,8 +124,8 @@ def test_no_bias_nothing_detected():
     excluded, the PLs are the all-in-view ones."""
     c, rng = fde_cases(301, N_FDE)
     y = np.where(c["valid"], rng.normal(0.0, np.sqrt(c["var_acc"])), 0.0)
-    fde = _np(detect_and_exclude(*_args(c, y), valid=c["valid"], max_order=1))
-    pl = protection_levels(*_args(c, y)[:-1], valid=c["valid"], max_order=1)
+    fde = _np(detect_and_exclude(*_args(c, y), araim.MHSSOptions(1)))
+    pl = protection_levels(*_args(c, y)[:-1], araim.MHSSOptions(1))
     assert not fde["detected"].any()
     assert not fde["excluded"].any()
     assert np.all(fde["exclusion_mode"] == -1)
@@ -145,7 +147,7 @@ def gps_bias():
     n_gps = np.sum(c["valid"][:, :L_GPS], axis=1)
     src = rng.integers(0, n_gps)
     y, bias = biased_residuals(c, rng, src)
-    fde = _np(detect_and_exclude(*_args(c, y), valid=c["valid"], max_order=1))
+    fde = _np(detect_and_exclude(*_args(c, y), araim.MHSSOptions(1)))
     return c, y, src, bias, fde
 
 
@@ -161,7 +163,7 @@ def test_injected_gps_bias_is_detected_and_excluded(gps_bias):
     wrong = np.flatnonzero(np.any(fde["excluded"] != expect, axis=1))
     assert wrong.size == 0, [(i, src[i], np.flatnonzero(fde["excluded"][i])) for i in wrong[:5]]
     assert np.all(fde["status"] == Status.OK)
-    sub = protection_levels(*_args(c, y)[:-1], valid=c["valid"] & ~expect, max_order=1)
+    sub = protection_levels(*_args(c, y, c["valid"] & ~expect)[:-1], araim.MHSSOptions(1))
     np.testing.assert_allclose(fde["pl.hpl_m"], np.asarray(sub.hpl_m), rtol=1e-9)
     np.testing.assert_allclose(fde["pl.vpl_m"], np.asarray(sub.vpl_m), rtol=1e-9)
 
@@ -174,7 +176,7 @@ def test_injected_sop_bias_is_detected_and_excluded():
     n_sop = np.sum(c["valid"][:, L_GPS:], axis=1)
     src = L_GPS + rng.integers(0, n_sop)
     y, bias = biased_residuals(c, rng, src)
-    fde = _np(detect_and_exclude(*_args(c, y), valid=c["valid"], max_order=1))
+    fde = _np(detect_and_exclude(*_args(c, y), araim.MHSSOptions(1)))
     has = bias > 0
     assert has.mean() > 0.9
     assert fde["detected"][has].all()
@@ -193,7 +195,7 @@ def test_fde_matches_oracle(gps_bias):
     rng = np.random.default_rng(304)
     y2, _ = biased_residuals(c, rng, src, noise_scale=1.0, strength=1.0)
     y2 = y2 * np.where(c["valid"], rng.uniform(0.5, 3.0, (N_FDE, 1)), 0.0)
-    fde2 = _np(detect_and_exclude(*_args(c, y2), valid=c["valid"], max_order=1))
+    fde2 = _np(detect_and_exclude(*_args(c, y2), araim.MHSSOptions(1)))
     counts = {"undetected": 0, "excluded": 0, "failed": 0}
     for res, yy in ((fde, y), (fde2, y2)):
         for i in range(0, N_FDE, 4):
@@ -228,15 +230,17 @@ def test_solution_separation_matches_oracle():
     y[np.arange(n), rng.integers(0, case["g"].shape[1], n)] += 20.0
     y = np.where(case["valid"], y, 0.0)
     bud = araim.BUDGET_SEED004_TABLE_I
-    sep = _np(solution_separation(
-        case["g"], case["constellation"], case["var_int"], case["var_acc"], case["b_nom"],
-        case["p_sat"], case["p_const"], bud, y, valid=case["valid"], max_order=3))
+    sep = _np(solution_separation(araim.Sources(case["g"], case["constellation"], case["var_int"],
+                                                case["var_acc"], case["b_nom"], case["p_sat"],
+                                                case["valid"]), case["p_const"], bud, y,
+                                  araim.MHSSOptions(3)))
     checked = 0
     for i in range(n):
-        args = (case["g"][i], case["constellation"][i], case["var_int"][i], case["var_acc"][i],
-                case["b_nom"][i], case["p_sat"][i], case["p_const"][i], bud, y[i],
-                case["valid"][i], 3)
-        o = ref.solution_separation_reference(*args)
+        o = ref.solution_separation_reference(
+            araim.Sources(case["g"][i], case["constellation"][i], case["var_int"][i],
+                          case["var_acc"][i], case["b_nom"][i], case["p_sat"][i],
+                          case["valid"][i]), case["p_const"][i], bud, y[i],
+            ref.ReferenceOptions(3))
         if o.result.borderline or o.result.status != ref.OK:
             continue
         modes = _modes(sep["excluded"][i], sep["monitored"][i])
@@ -281,7 +285,7 @@ def test_failures_are_data_in_fde():
     c["var_int"][:4, 8:] = c["var_acc"][:4, 8:] = 1.0
     y = np.where(c["valid"], rng.normal(0.0, np.sqrt(c["var_acc"])), np.nan)
     y[:4, 0] = 50.0
-    fde = _np(detect_and_exclude(*_args(c, y), valid=c["valid"], max_order=1))
+    fde = _np(detect_and_exclude(*_args(c, y), araim.MHSSOptions(1)))
     for k, v in fde.items():
         assert not np.any(np.isnan(v.astype(float))), k
     np.testing.assert_array_equal(fde["pl.status"][1:4], [1, 2, 5])

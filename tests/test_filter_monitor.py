@@ -88,8 +88,8 @@ def test_static_state_equals_snapshot_mhss_of_stacked_epochs(seed):
         w = np.sum(1.0 / sig[:k + 1] ** 2, 0)
         var = 1.0 / w                                   # k + 1 rows of a tower: one row
         z_eff = np.sum(z[:k + 1] / sig[:k + 1] ** 2, 0) * var
-        snap = araim.protection_levels(g[0], CON, var, var, np.zeros(L), P_SAT, P_CONST,
-                                       BUDGET, max_order=1, fault_modes=RULE)
+        snap = araim.protection_levels(araim.Sources(g[0], CON, var, var, np.zeros(L), P_SAT),
+                                       P_CONST, BUDGET, araim.MHSSOptions(1, fault_modes=RULE))
         assert int(snap.status) == Status.OK == int(out.status[k])
         for ours, theirs in ((out.hpl_m, snap.hpl_m), (out.vpl_m, snap.vpl_m),
                              (out.emt_m, snap.emt_m)):
@@ -98,9 +98,10 @@ def test_static_state_equals_snapshot_mhss_of_stacked_epochs(seed):
         assert float(out.p_not_monitored[k]) == pytest.approx(float(snap.p_not_monitored),
                                                               rel=1e-12)
         tl = lambda a: jnp.asarray(a)[..., None]  # noqa: E731  (batch of one, last)
-        pr = araim.mhss.project(tl(g[0]), tl(CON), tl(var), tl(var), tl(np.zeros(L)),
-                                tl(P_SAT), tl(P_CONST), tl(np.ones(L, bool)), BUDGET, 1, "int",
-                                fault_modes=FaultModeRule(RULE))
+        pr = araim.mhss.project(
+            araim.Sources(tl(g[0]), tl(CON), tl(var), tl(var), tl(np.zeros(L)), tl(P_SAT),
+                          tl(np.ones(L, bool))), tl(P_CONST), BUDGET,
+            araim.MHSSOptions(1, fault_modes=FaultModeRule(RULE)))
         s_pos = np.asarray(pr.s_pos[..., 0])          # (K, 3, L)
         sep = (s_pos - s_pos[:1]) @ z_eff              # the snapshot's separations
         mon = np.asarray(pr.monitored[:, 0])
@@ -167,8 +168,9 @@ def test_huge_process_noise_equals_snapshot_mhss_of_each_epoch(seed):
     g, sig, h, z = _case(200 + seed, static=False)
     out = _run(h, sig, z, q=1e14)
     for k in range(E):
-        snap = araim.protection_levels(g[k], CON, sig[k] ** 2, sig[k] ** 2, np.zeros(L), P_SAT,
-                                       P_CONST, BUDGET, max_order=1, fault_modes=RULE)
+        snap = araim.protection_levels(araim.Sources(g[k], CON, sig[k] ** 2, sig[k] ** 2,
+                                                     np.zeros(L), P_SAT), P_CONST, BUDGET,
+                                       araim.MHSSOptions(1, fault_modes=RULE))
         assert abs(float(out.hpl_m[k]) - float(snap.hpl_m)) < 1e-6
         assert abs(float(out.vpl_m[k]) - float(snap.vpl_m)) < 1e-6
         assert abs(float(out.emt_m[k]) - float(snap.emt_m)) < 1e-6

@@ -104,7 +104,7 @@ def _sources(p, valid, constellation):
 
 def _outputs(p, valid, constellation):
     r = araim.protection_levels_kernel(_sources(p, valid, constellation), p["p_const"], BUDGET,
-                                       max_order=1, fault_modes="grouped")
+                                       araim.MHSSOptions(1, fault_modes="grouped"))
     return {k: getattr(r, k) for k in OUTPUTS} | {"status": r.status, "pl_enu_m": r.pl_enu_m}
 
 
@@ -246,15 +246,17 @@ def test_bench_rows_are_away_from_switches(case):
     """The FD comparisons below need every compared row at least 1e-3 (relative) from a
     decision switch; the failing rows are not compared."""
     p, valid, constellation = case
-    flags = np.asarray(araim.switch_flags_kernel(_sources(p, valid, constellation),
-                                                 p["p_const"], BUDGET, max_order=1,
-                                                 fault_modes="grouped", rtol=1e-3))
+    flags = np.asarray(araim.switch_flags_kernel(_sources(p, valid, constellation), p["p_const"],
+                                                 BUDGET,
+                                                 araim.MHSSOptions(1, fault_modes="grouped"),
+                                                 rtol=1e-3))
     assert np.all(flags[OK_ROWS] == 0), flags
     # ... and the bench's own GPS P_s (1e-5) sits on the EMT's switch: flagged
     on_edge = dict(p, p_sat=p["p_sat"].at[:, :N_GPS].set(1e-5))
     flags = np.asarray(araim.switch_flags_kernel(_sources(on_edge, valid, constellation),
-                                                 p["p_const"], BUDGET, max_order=1,
-                                                 fault_modes="grouped", rtol=1e-3))
+                                                 p["p_const"], BUDGET,
+                                                 araim.MHSSOptions(1, fault_modes="grouped"),
+                                                 rtol=1e-3))
     assert np.all(flags[:12] == araim.mhss.SWITCH_EMT), flags
     status = np.asarray(_value(p, valid, constellation)["status"])
     assert np.all(status[OK_ROWS] == Status.OK)
@@ -285,8 +287,8 @@ def _oracle(p, valid, constellation):
     pc = np.asarray(p["p_const"])
     out = np.zeros((len(OK_ROWS), 4))
     for n, i in enumerate(OK_ROWS):
-        res = ref.protection_levels_reference(*(x[i] for x in src[:6]), pc[i], BUDGET,
-                                              src[6][i], max_order=1, fault_modes="grouped")
+        res = ref.protection_levels_reference(tuple(x[i] for x in src), pc[i], BUDGET,
+                                              ref.ReferenceOptions(1, fault_modes="grouped"))
         assert res.status == ref.OK
         pl = [optimize.brentq(lambda x, q=q, r=res: np.subtract(*ref.pl_equation(r, BUDGET, q, x)),
                               res.pl_enu_m[q] - 1e-2, res.pl_enu_m[q] + 1e-2, xtol=1e-12,

@@ -14,7 +14,6 @@ comparison, so the handful of comparisons here fail by chance with probability <
 Compiled shapes: L = 18, C = 2 (the FDE cases), order 1.
 """
 
-from functools import partial
 
 import jax
 import numpy as np
@@ -25,11 +24,12 @@ from oaraim import araim
 from oaraim.araim import Status
 from oaraim.araim import integrity_risk as ir
 from tests.test_fde import L_GPS, L, _args, fde_cases
+from tests.test_mhss import grouped
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-detect_and_exclude = partial(araim.detect_and_exclude, fault_modes="grouped")
-monitor_maps = partial(ir.monitor_maps, fault_modes="grouped")
+detect_and_exclude = grouped(araim.detect_and_exclude)
+monitor_maps = grouped(ir.monitor_maps)
 
 #: a deliberately weak budget: fault-free vertical risk ~1e-3, resolvable by crude Monte Carlo
 WEAK = araim.IntegrityBudget(phmi_v=2e-3, phmi_h=2e-3, p_fa_v=1e-3, p_fa_h=1e-3, p_thresh=6e-8)
@@ -39,9 +39,9 @@ N_GEOM = 6
 def _maps(c, budget):
     """One geometry per call, stacked: the (L, 3) shapes the study's kernel compiles (L = 18 is
     12 GPS slots + 6 SOPs there, see tests/test_studies.py SMALL), so the suite compiles once."""
-    one = [monitor_maps(c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i],
-                           c["b_nom"][i], c["p_sat"][i], c["p_const"][i], budget,
-                           valid=c["valid"][i], max_order=1) for i in range(len(c["g"]))]
+    one = [monitor_maps(araim.Sources(c["g"][i], c["constellation"][i], c["var_int"][i],
+                                      c["var_acc"][i], c["b_nom"][i], c["p_sat"][i], c["valid"][i]),
+                        c["p_const"][i], budget, araim.MHSSOptions(1)) for i in range(len(c["g"]))]
     return jax.tree.map(lambda *a: np.stack(a), *one)
 
 
@@ -71,7 +71,7 @@ def test_maps_reproduce_detect_and_exclude(cases):
     out = jax.vmap(lambda m, r: ir.evaluate(m, r[None]))(_pick(maps, gi), y)
     out = jax.tree.map(lambda a: np.asarray(a)[:, 0], out)
     bc = {k: v[gi] for k, v in c.items()}
-    fde = detect_and_exclude(*_args(bc, y), valid=bc["valid"], max_order=1)
+    fde = detect_and_exclude(*_args(bc, y), araim.MHSSOptions(1))
     det = np.asarray(fde.detected)
     mode = np.asarray(fde.exclusion_mode)
     pos = np.asarray(fde.position_m)
@@ -110,8 +110,8 @@ def test_fault_free_vertical_risk_closed_form(cases, weak):
         m = _pick(maps_w if weak else maps_t, i)
         assert int(m.status) == Status.OK
         expect, p_fa = _closed_form_ff_v(m, budget)
-        _, _, e = ir.scenario_estimate(m, ir.FAULT_FREE, -1, -1, ir.VERTICAL, 0.0,
-                                       jax.random.key(10 + i), n_samples=4000)
+        _, _, e = ir.scenario_estimate(m, ir.Scenario(ir.FAULT_FREE, ir.VERTICAL, 0.0),
+                                       jax.random.key(10 + i), ir.Sampling(n_samples=4000))
         p, se = float(e.p_md), float(e.se_md)
         assert se < 0.2 * p  # mean shift to the boundary: relative variance ~1.25 t per sample
         assert expect * (1 - p_fa) - 4 * se <= p <= expect + 4 * se, (i, p, se, expect)
@@ -132,9 +132,11 @@ def test_importance_sampling_agrees_with_crude_monte_carlo(cases):
                          (ir.SINGLE, worst, 1.2)):
         for d in (ir.HORIZONTAL, ir.VERTICAL):
             k = jax.random.key(int(100 * kind + 10 * x + d))
-            _, _, a = ir.scenario_estimate(m, kind, src, -1, d, x, k, n_samples=4000)
-            _, _, b = ir.scenario_estimate(m, kind, src, -1, d, x, jax.random.fold_in(k, 7),
-                                           n_samples=100_000, crude=True)
+            _, _, a = ir.scenario_estimate(m, ir.Scenario(kind, d, x, source=src), k,
+                                           ir.Sampling(n_samples=4000))
+            _, _, b = ir.scenario_estimate(m, ir.Scenario(kind, d, x, source=src),
+                                           jax.random.fold_in(k, 7),
+                                           ir.Sampling(n_samples=100_000, crude=True))
             pa, sa, pb, sb = (float(v) for v in (a.p_md, a.se_md, b.p_md, b.se_md))
             # (fault-free horizontal: ~1e-5 here, the HPL adds the east and north PLs; crude
             # sees a few hits and the comparison is loose but still made)
@@ -155,19 +157,21 @@ def test_ramp_risk(cases):
     _, _, _, maps_w = cases
     m = _pick(maps_w, 1)
     l = int(np.argmax(np.abs(np.asarray(m.s0[2])) * np.asarray(m.valid)))
-    r = ir.ramp_risk(m, l, ir.VERTICAL, 0.0, 4.0, 1.0, jax.random.key(5), n_samples=4000)
+    r = ir.ramp_risk(m, ir.Ramp(l, ir.VERTICAL, 0.0, 4.0, 1.0), jax.random.key(5),
+                     ir.Sampling(n_samples=4000))
     expect, p_fa = _closed_form_ff_v(m, WEAK)
     np.testing.assert_array_equal(r.time_s, [1.0, 2.0, 3.0, 4.0])
     assert np.all(np.abs(r.p_md - expect) <= 4 * r.se_md + expect * p_fa)
     assert r.union_p_md == pytest.approx(r.p_md.sum()) and r.mean_p_md == pytest.approx(
         r.p_md.mean())
     a_det = float(ir.injection(m, ir.SINGLE, l, -1, ir.VERTICAL).a_det_m)
-    r = ir.ramp_risk(m, l, ir.VERTICAL, 1.0, 3.0 * a_det, a_det / 10, jax.random.key(6),
-                     n_samples=1000, ce_samples=500)  # 30 epochs: the study test's shapes
+    # 30 epochs: the study test's shapes
+    r = ir.ramp_risk(m, ir.Ramp(l, ir.VERTICAL, 1.0, 3.0 * a_det, a_det / 10), jax.random.key(6),
+                     ir.Sampling(n_samples=1000, ce_samples=500))
     assert r.p_detect[-1] > 0.999 and r.p_md[-1] < 1e-6
     assert r.p_md.max() > 10 * r.p_md[0]
     with pytest.raises(ValueError, match="epoch_s"):
-        ir.ramp_risk(m, l, ir.VERTICAL, 1.0, 3.0, 0.0, jax.random.key(0))
+        ir.ramp_risk(m, ir.Ramp(l, ir.VERTICAL, 1.0, 3.0, 0.0), jax.random.key(0))
 
 
 def test_injection_hand_values(cases):
@@ -206,8 +210,8 @@ def test_pl_bounds_measured_risk_table_i(cases):
     for i in range(2):
         m = _pick(maps, i)
         # the sizes of the study's generic tests (tests/test_studies.py SMALL): one compilation
-        t = ir.risk_table(m, jax.random.key(i), (0.0, 0.9, 1.1, 1.5), n_samples=1000,
-                          ce_samples=500)
+        t = ir.risk_table(m, jax.random.key(i), (0.0, 0.9, 1.1, 1.5),
+                          sampling=ir.Sampling(n_samples=1000, ce_samples=500))
         risk, upper, _, _ = ir.measured_risk(t)
         alloc = ir.allocated_budget(araim.BUDGET_SEED004_TABLE_I, float(m.p_not_monitored))
         assert np.all(np.isfinite(upper)) and np.all(risk > 0)
@@ -242,7 +246,8 @@ def test_unavailable_geometry_has_no_risk_and_no_nan(cases):
     c1["valid"][0, 4:] = False
     m = _pick(_maps(c1, WEAK), 0)
     assert int(m.status) != Status.OK
-    t = ir.risk_table(m, jax.random.key(0), (0.0, 1.0), n_samples=100, ce_samples=100)
+    t = ir.risk_table(m, jax.random.key(0), (0.0, 1.0),
+                      sampling=ir.Sampling(n_samples=100, ce_samples=100))
     assert not np.asarray(t.active).any()
     for v in t.estimate:
         assert np.all(np.asarray(v) == 0) or v is t.estimate.weight_sup
@@ -252,12 +257,12 @@ def test_bad_options_are_named(cases):
     _, _, maps, _ = cases
     m = _pick(maps, 0)
     with pytest.raises(ValueError, match="nominal_bias"):
-        ir.risk_table(m, jax.random.key(0), nominal_bias="max")
+        ir.risk_table(m, jax.random.key(0), sampling=ir.Sampling(nominal_bias="max"))
     with pytest.raises(ValueError, match="one geometry"):
         ir.risk_table(maps, jax.random.key(0))
     with pytest.raises(ValueError, match="x_grid"):
         ir.risk_table(m, jax.random.key(0), (-1.0,))
     with pytest.raises(ValueError, match="direction"):
-        ir.scenario_estimate(m, ir.FAULT_FREE, -1, -1, 2, 0.0, jax.random.key(0))
+        ir.scenario_estimate(m, ir.Scenario(ir.FAULT_FREE, 2, 0.0), jax.random.key(0))
     with pytest.raises(ValueError, match="budget"):
-        monitor_maps(np.zeros((5, 3)), 0, 1.0, 1.0, 0.0, 1e-5, [1e-8], None)
+        monitor_maps(araim.Sources(np.zeros((5, 3)), 0, 1.0, 1.0, 0.0, 1e-5), [1e-8], None)

@@ -17,7 +17,7 @@ from tests.test_conformance import ADD_C_ACC, ADD_C_INT, ADD_CONST, ADD_P_CONST,
 L = 10
 B = 2
 BUDGET = araim.BUDGET_LPV200
-KW = dict(max_order=1, fault_modes="add-v4.2")
+OPTIONS = araim.MHSSOptions(1, fault_modes="add-v4.2")
 
 
 def inputs():
@@ -28,8 +28,9 @@ def inputs():
 
 
 def call(fn, x, *extra, valid=None):
-    return fn(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"], x["b_nom_m"],
-              x["p_sat"], x["p_const"], BUDGET, *extra, valid=valid, **KW)
+    sources = araim.Sources(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
+                            x["b_nom_m"], x["p_sat"], valid)
+    return fn(sources, x["p_const"], BUDGET, *extra, OPTIONS)
 
 
 def residuals():
@@ -222,4 +223,4 @@ def test_wnls_refuses_a_nonfinite_initial_state():
     x0[1, 2] = np.nan
     with pytest.raises(ValueError, match=r"x0_m \(the initial state\) is not finite at batch "
                                          r"index \(1,\)"):
-        araim.wnls(pr, tx, s, x0_m=x0)
+        araim.wnls(pr, tx, s, x0)

@@ -45,15 +45,13 @@ def bench():
 
 
 def _host(sources, p_const):
-    s = sources
-    return araim.protection_levels(s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m,
-                                   s.p_sat, p_const, BUDGET, s.valid, max_order=1,
-                                   fault_modes=GROUPED)
+    return araim.protection_levels(sources, p_const, BUDGET,
+                                   araim.MHSSOptions(1, fault_modes=GROUPED))
 
 
 def _kernel(sources, p_const):
-    return araim.protection_levels_kernel(sources, p_const, BUDGET, max_order=1,
-                                          fault_modes=GROUPED)
+    return araim.protection_levels_kernel(sources, p_const, BUDGET,
+                                          araim.MHSSOptions(1, fault_modes=GROUPED))
 
 
 def test_protection_levels_kernel_under_jit_and_vmap_matches_host(bench):
@@ -104,12 +102,12 @@ def test_protection_levels_kernel_static_arguments_are_checked(bench):
     """A malformed static argument is a ValueError naming it, before any tracing."""
     sources, p_const = bench
     with pytest.raises(ValueError, match="max_order"):
-        araim.protection_levels_kernel(sources, p_const, BUDGET, max_order=None)
+        araim.protection_levels_kernel(sources, p_const, BUDGET, araim.MHSSOptions(None))
     with pytest.raises(ValueError, match="budget"):
-        araim.protection_levels_kernel(sources, p_const, 1e-7, max_order=1)
+        araim.protection_levels_kernel(sources, p_const, 1e-7, araim.MHSSOptions(1))
     with pytest.raises(ValueError, match="all_in_view_weighting"):
-        araim.protection_levels_kernel(sources, p_const, BUDGET, max_order=1,
-                                       all_in_view_weighting="x")
+        araim.protection_levels_kernel(sources, p_const, BUDGET,
+                                       araim.MHSSOptions(1, all_in_view_weighting="x"))
 
 
 def test_priors_kernel_equals_one_kernel_call_per_prior_set(bench):
@@ -124,21 +122,21 @@ def test_priors_kernel_equals_one_kernel_call_per_prior_set(bench):
     sets[1, 4, np.flatnonzero(sources.valid[4])[0]] = 1.2
     pc = np.broadcast_to(p_const, (3,) + p_const.shape)
     res = araim.protection_levels_priors_kernel(sources._replace(p_sat=sets), pc, BUDGET,
-                                                max_order=2, fault_modes=GROUPED)
+                                                araim.MHSSOptions(2, fault_modes=GROUPED))
     orders = set()
     for i in range(3):
         one = araim.protection_levels_kernel(sources._replace(p_sat=sets[i]), pc[i], BUDGET,
-                                             max_order=2, fault_modes=GROUPED)
+                                             araim.MHSSOptions(2, fault_modes=GROUPED))
         _equal(type(one)(*(x[i] for x in res)), one, rtol=1e-12)
         orders |= set(np.asarray(one.order).tolist())
         bad = np.asarray(one.status) == Status.INVALID_INPUT
         assert bad.tolist() == [i == 1 and b == 4 for b in range(N)]
     assert orders == {1, 2}  # both templates' paths are exercised
     alone = araim.protection_levels_priors_kernel(sources._replace(p_sat=sets[1:2]), pc[1:2],
-                                                  BUDGET, max_order=2, fault_modes=GROUPED)
+                                                  BUDGET, araim.MHSSOptions(2, fault_modes=GROUPED))
     _equal(type(alone)(*(x[0] for x in alone)), type(res)(*(x[1] for x in res)))
     with pytest.raises(ValueError, match="leading axis"):
-        araim.protection_levels_priors_kernel(sources, p_const, BUDGET, max_order=1)
+        araim.protection_levels_priors_kernel(sources, p_const, BUDGET, araim.MHSSOptions(1))
 
 
 @pytest.fixture(scope="module")
@@ -151,34 +149,28 @@ def fde():
     return sources, c["p_const"], y
 
 
-def _fde_args(sources, p_const, y):
-    s = sources
-    return (s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat, p_const,
-            BUDGET, y, s.valid)
-
-
 def test_separation_and_exclusion_kernels_under_jit_match_host(fde):
     """``separation_kernel`` and ``detect_and_exclude_kernel`` inside the caller's jit: the
     bits of ``solution_separation`` and ``detect_and_exclude``; a non-finite residual of a
     valid source comes back as INVALID_INPUT (no detection), where the host raises."""
     sources, p_const, y = fde
-    kw = dict(max_order=1, fault_modes=GROUPED)
-    sep = jax.jit(lambda s, p, r: araim.separation_kernel(s, p, BUDGET, r, **kw))(
+    kw = araim.MHSSOptions(1, fault_modes=GROUPED)
+    sep = jax.jit(lambda s, p, r: araim.separation_kernel(s, p, BUDGET, r, kw))(
         sources, p_const, y)
-    _equal(sep, araim.solution_separation(*_fde_args(sources, p_const, y), **kw))
-    fde_res = jax.jit(lambda s, p, r: araim.detect_and_exclude_kernel(s, p, BUDGET, r, **kw))(
+    _equal(sep, araim.solution_separation(sources, p_const, BUDGET, y, kw))
+    fde_res = jax.jit(lambda s, p, r: araim.detect_and_exclude_kernel(s, p, BUDGET, r, kw))(
         sources, p_const, y)
-    host = araim.detect_and_exclude(*_fde_args(sources, p_const, y), **kw)
+    host = araim.detect_and_exclude(sources, p_const, BUDGET, y, kw)
     _equal(fde_res, host)
     assert bool(np.asarray(host.detected)[2])
     y_bad = y.copy()
     y_bad[4, 1] = np.nan
-    sep_bad = jax.jit(lambda s, p, r: araim.separation_kernel(s, p, BUDGET, r, **kw))(
+    sep_bad = jax.jit(lambda s, p, r: araim.separation_kernel(s, p, BUDGET, r, kw))(
         sources, p_const, y_bad)
     assert int(np.asarray(sep_bad.pl.status)[4]) == Status.INVALID_INPUT
     assert not bool(np.asarray(sep_bad.detected)[4])
     with pytest.raises(ValueError, match="residual_m"):
-        araim.solution_separation(*_fde_args(sources, p_const, y_bad), **kw)
+        araim.solution_separation(sources, p_const, BUDGET, y_bad, kw)
 
 
 def test_slope_kernels_under_jit_and_vmap_match_host(bench):
@@ -214,13 +206,13 @@ def test_wnls_kernel_under_jit_matches_host():
     clock = np.zeros((8, 7), np.int32)
     x0 = np.zeros((8, 4))
     host = araim.wnls(pr, tx, sigma, x0, valid, clock)
-    got = jax.jit(lambda *a: araim.wnls_kernel(*a, n_clocks=1))(pr, tx, sigma, x0, valid, clock)
+    one = araim.WNLSOptions(n_clocks=1)
+    got = jax.jit(lambda *a: araim.wnls_kernel(*a, one))(pr, tx, sigma, x0, valid, clock)
     _equal(got, host)
     assert np.all(np.asarray(host.status) == Status.OK)
     pr_bad = pr.copy()
     pr_bad[6, 2] = np.inf
-    bad = jax.jit(lambda *a: araim.wnls_kernel(*a, n_clocks=1))(pr_bad, tx, sigma, x0, valid,
-                                                                clock)
+    bad = jax.jit(lambda *a: araim.wnls_kernel(*a, one))(pr_bad, tx, sigma, x0, valid, clock)
     assert int(np.asarray(bad.status)[6]) == Status.INVALID_INPUT
     with pytest.raises(ValueError, match="pseudorange_m"):
         araim.wnls(pr_bad, tx, sigma, x0, valid, clock)

@@ -50,8 +50,8 @@ def test_exact_derivative_matches_finite_differences(small):
     pc = jnp.float64(1e-4)
     v0, h0 = ls.gnss_only(d, pc, signal=sig, fault_modes="grouped")
     keep = d["n_in_view"] >= 4
-    f = lambda s: ls.cell(d, keep, 4, jnp.float64(s), jnp.float64(-5.0), pc, v0, h0,  # noqa: E731
-                          max_order=1, signal=sig, fault_modes="grouped")
+    f = lambda s: ls.cell(d, keep, 4, jnp.float64(s), (jnp.float64(-5.0), pc),  # noqa: E731
+                          (v0, h0), setup=(1, sig, "grouped"))
     (v, dv) = (np.asarray(x) for x in f(3.0))
     e = 1e-4
     fd = (np.asarray(f(3.0 + e)[0]) - np.asarray(f(3.0 - e)[0])) / (2 * e)

@@ -80,10 +80,11 @@ def _pl(x, valid=None, order=None):
     valid = np.ones(n, bool) if valid is None else valid
     pad = next(p for p in PAD if p >= n) - n
     z = lambda a, v=0.0: np.pad(a, [(0, pad)] + [(0, 0)] * (a.ndim - 1), constant_values=v)  # noqa: E731
-    return araim.protection_levels(z(x["g"]), z(x["const"], 0), z(x["vi"], 1.0),
-                                   z(x["va"], 1.0), z(x["b_nom"]), z(x["p_sat"], 1e-5),
-                                   x["p_const"], araim.BUDGET_LPV200, z(valid, False),
-                                   max_order=order, fault_modes=RULE)
+    return araim.protection_levels(araim.Sources(z(x["g"]), z(x["const"], 0), z(x["vi"], 1.0),
+                                                 z(x["va"], 1.0), z(x["b_nom"]),
+                                                 z(x["p_sat"], 1e-5), z(valid, False)),
+                                   x["p_const"], araim.BUDGET_LPV200,
+                                   araim.MHSSOptions(order, fault_modes=RULE))
 
 
 def test_iono_scales_with_inverse_square_frequency():
@@ -164,9 +165,10 @@ def test_mhss_at_40_to_52_sources_matches_the_oracle(total):
                                          fault_modes=RULE))
         assert order == 2
         k = _pl(x, valid, order=order)
-        o = ref.protection_levels_reference(x["g"], x["const"], x["vi"], x["va"], x["b_nom"],
-                                            x["p_sat"], x["p_const"], araim.BUDGET_LPV200,
-                                            valid, max_order=order, fault_modes=RULE)
+        o = ref.protection_levels_reference(araim.Sources(x["g"], x["const"], x["vi"], x["va"],
+                                                          x["b_nom"], x["p_sat"], valid),
+                                            x["p_const"], araim.BUDGET_LPV200,
+                                            ref.ReferenceOptions(max_order=order, fault_modes=RULE))
         assert int(k.status) == int(o.status) == 0
         assert int(k.order) == int(o.order)
         assert int(k.n_modes) == int(o.n_modes)

@@ -52,12 +52,13 @@ def _sky():
 
 def _both(g, const, vi, va, b_nom, p_sat, p_const, valid, rule, order):
     """The batched kernel's and the oracle's result for one geometry."""
-    k = araim.protection_levels(g, const, vi, va, b_nom, p_sat, p_const, araim.BUDGET_LPV200,
-                                valid, max_order=order, fault_modes=rule)
-    o = ref.protection_levels_reference(g, const, vi, va, np.broadcast_to(b_nom, valid.shape),
-                                        np.broadcast_to(p_sat, valid.shape), p_const,
-                                        araim.BUDGET_LPV200, valid, max_order=order,
-                                        fault_modes=rule)
+    k = araim.protection_levels(araim.Sources(g, const, vi, va, b_nom, p_sat, valid), p_const,
+                                araim.BUDGET_LPV200, araim.MHSSOptions(order, fault_modes=rule))
+    o = ref.protection_levels_reference(araim.Sources(g, const, vi, va,
+                                                      np.broadcast_to(b_nom, valid.shape),
+                                                      np.broadcast_to(p_sat, valid.shape), valid),
+                                        p_const, araim.BUDGET_LPV200,
+                                        ref.ReferenceOptions(max_order=order, fault_modes=rule))
     return {f: np.asarray(v) for f, v in k._asdict().items()}, o
 
 
@@ -88,8 +89,9 @@ def test_nine_gps_and_one_galileo(rule, order):
     assert float(k1["hpl_m"]) >= float(k0["hpl_m"]) - RAISE_TOL_M
     assert float(k1["vpl_m"]) >= float(k0["vpl_m"]) - RAISE_TOL_M
     # the lone satellite's mode: monitored, its separation and threshold zero (Theorem 1)
-    sep = araim.solution_separation(g, const, vi, va, 0.75, 1e-5, p_const, araim.BUDGET_LPV200,
-                                    np.zeros(12), both, max_order=order, fault_modes=rule)
+    sep = araim.solution_separation(araim.Sources(g, const, vi, va, 0.75, 1e-5, both), p_const,
+                                    araim.BUDGET_LPV200, np.zeros(12),
+                                    araim.MHSSOptions(order, fault_modes=rule))
     lone = np.flatnonzero(np.asarray(sep.excluded)[:, 9] & np.asarray(sep.monitored))
     assert lone.size == 1
     assert np.all(np.abs(np.asarray(sep.threshold_m)[lone]) <= 1e-9)
@@ -142,15 +144,15 @@ def test_random_lone_source_geometries_match_the_oracle(rule, order):
     with the oracle wherever the oracle's singularity test is not borderline, and every
     geometry that has 4 + C sources is OK (none was under the ADD conventions)."""
     g, const, vi, va, b, ps, pc, valid = _random_lone_cases(4401, 32)
-    res = araim.protection_levels(g, const, vi, va, b, ps, pc, araim.BUDGET_LPV200, valid,
-                                  max_order=order, fault_modes=rule)
+    res = araim.protection_levels(araim.Sources(g, const, vi, va, b, ps, valid), pc,
+                                  araim.BUDGET_LPV200, araim.MHSSOptions(order, fault_modes=rule))
     res = {f: np.asarray(v) for f, v in res._asdict().items()}
     assert np.all(res["status"] == Status.OK)
     compared = 0
     for i in range(g.shape[0]):
-        o = ref.protection_levels_reference(g[i], const[i], vi[i], va[i], b[i], ps[i], pc[i],
-                                            araim.BUDGET_LPV200, valid[i], max_order=order,
-                                            fault_modes=rule)
+        o = ref.protection_levels_reference(araim.Sources(g[i], const[i], vi[i], va[i], b[i], ps[i],
+                                                          valid[i]), pc[i], araim.BUDGET_LPV200,
+                                            ref.ReferenceOptions(max_order=order, fault_modes=rule))
         if o.borderline:
             continue
         compared += 1
@@ -167,10 +169,11 @@ def test_theorem_2_under_the_add_conventions(rule):
     old, new = theorem_cases(20041, 300)
     out = {}
     for name, c in (("old", old), ("new", new)):
-        out[name] = araim.solution_separation(
-            c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"], c["p_sat"],
-            c["p_const"], araim.BUDGET_SEED004_TABLE_I, c["residual"], c["valid"],
-            max_order=1, fault_modes=rule)
+        out[name] = araim.solution_separation(araim.Sources(c["g"], c["constellation"],
+                                                            c["var_int"], c["var_acc"], c["b_nom"],
+                                                            c["p_sat"], c["valid"]), c["p_const"],
+                                              araim.BUDGET_SEED004_TABLE_I, c["residual"],
+                                              araim.MHSSOptions(1, fault_modes=rule))
     h0, h1 = (np.asarray(out[k].pl.hpl_m) for k in ("old", "new"))
     v0, v1 = (np.asarray(out[k].pl.vpl_m) for k in ("old", "new"))
     assert np.all(np.asarray(out["new"].pl.status) == Status.OK)
@@ -195,9 +198,9 @@ def test_detection_and_exclusion_around_a_lone_satellite():
     y[0, 9] = 1000.0
     y[1, 3] = 60.0
     two = lambda x: np.broadcast_to(x, (2,) + np.shape(x))  # noqa: E731
-    r = araim.detect_and_exclude(two(g), two(const), two(vi), two(va), 0.75, 1e-5,
-                                 np.array([1e-8, 1e-4]), araim.BUDGET_LPV200, y, two(valid),
-                                 max_order=1)
+    r = araim.detect_and_exclude(araim.Sources(two(g), two(const), two(vi), two(va), 0.75, 1e-5,
+                                               two(valid)), np.array([1e-8, 1e-4]),
+                                 araim.BUDGET_LPV200, y, araim.MHSSOptions(1))
     assert np.asarray(r.detected).tolist() == [False, True]
     assert np.asarray(r.status).tolist() == [Status.OK, Status.OK]
     assert np.flatnonzero(np.asarray(r.excluded)[1]).tolist() == [3]
@@ -211,10 +214,10 @@ def test_integrity_risk_maps_around_a_lone_satellite():
     g, vi, va = _sky()
     const = np.array([0] * 9 + [1, 1, 1])
     valid = np.arange(12) < 10
-    args = (g, const, vi, va, np.full(12, 0.75), np.full(12, 1e-5), np.array([1e-8, 1e-4]),
-            araim.BUDGET_LPV200, valid)
-    maps = monitor_maps(*args, max_order=1)
-    pl = araim.protection_levels(*args, max_order=1)
+    args = (araim.Sources(g, const, vi, va, np.full(12, 0.75), np.full(12, 1e-5), valid),
+            np.array([1e-8, 1e-4]), araim.BUDGET_LPV200, araim.MHSSOptions(1))
+    maps = monitor_maps(*args)
+    pl = araim.protection_levels(*args)
     assert int(maps.status) == Status.OK
     assert float(maps.vpl_m) == pytest.approx(float(pl.vpl_m), abs=1e-9)
     assert int(np.asarray(maps.monitored).sum()) == int(pl.n_modes) == 10
@@ -257,8 +260,8 @@ def test_gradient_through_a_lone_satellite_matches_finite_differences():
     p_const = jnp.array([1e-8, 1e-4])
 
     def vpl(rows):
-        return araim.protection_levels_kernel(src._replace(g=rows), p_const,
-                                              araim.BUDGET_LPV200, max_order=1).vpl_m
+        return araim.protection_levels_kernel(src._replace(g=rows), p_const, araim.BUDGET_LPV200,
+                                              araim.MHSSOptions(1)).vpl_m
 
     grad = np.asarray(jax.grad(vpl)(src.g))
     step = 1e-6

@@ -13,8 +13,6 @@ Compiled shapes are kept few (DESIGN.md): every random batch is padded to L = 28
 the hand cases to L = 8, C = 2.
 """
 
-from functools import partial
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -26,9 +24,25 @@ from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.errors import gnss_variances, sop_variances
 
+
+def grouped(fn):
+    """``fn`` (an MHSS host function) under seed 004's ``grouped`` convention: the
+    ``araim.MHSSOptions`` it is given (or the default one, appended) with that rule."""
+    def call(*args, **kw):
+        opts = [a for a in args if isinstance(a, araim.MHSSOptions)]
+        if opts:
+            args = tuple(a._replace(fault_modes="grouped")
+                         if isinstance(a, araim.MHSSOptions) else a for a in args)
+        else:
+            args = (*args, araim.MHSSOptions(fault_modes="grouped"))
+        return fn(*args, **kw)
+
+    return call
+
+
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-protection_levels = partial(araim.protection_levels, fault_modes="grouped")
+protection_levels = grouped(araim.protection_levels)
 GROUPED = araim.FaultModeRule("grouped")
 
 L_GPS, L_GAL, L_SOP = 12, 8, 8
@@ -128,18 +142,21 @@ def random_cases(seed, n):
 
 
 def run_jax(case, bud=None, max_order=3, sl=slice(None)):
-    res = protection_levels(
-        case["g"][sl], case["constellation"][sl], case["var_int"][sl], case["var_acc"][sl],
-        case["b_nom"][sl], case["p_sat"][sl], case["p_const"][sl], bud or budget(),
-        valid=case["valid"][sl], max_order=max_order)
+    res = protection_levels(araim.Sources(case["g"][sl], case["constellation"][sl],
+                                          case["var_int"][sl], case["var_acc"][sl],
+                                          case["b_nom"][sl], case["p_sat"][sl], case["valid"][sl]),
+                            case["p_const"][sl], bud or budget(), araim.MHSSOptions(max_order))
     return {k: np.asarray(getattr(res, k)) for k in res._fields}
 
 
 def run_ref(case, i, bud=None, max_order=3, singular_rtol=ref.SINGULAR_RTOL):
-    return ref.protection_levels_reference(
-        case["g"][i], case["constellation"][i], case["var_int"][i], case["var_acc"][i],
-        case["b_nom"][i], case["p_sat"][i], case["p_const"][i], bud or budget(),
-        case["valid"][i], max_order, singular_rtol)
+    return ref.protection_levels_reference(araim.Sources(case["g"][i], case["constellation"][i],
+                                                         case["var_int"][i], case["var_acc"][i],
+                                                         case["b_nom"][i], case["p_sat"][i],
+                                                         case["valid"][i]), case["p_const"][i],
+                                           bud or budget(),
+                                           ref.ReferenceOptions(max_order=max_order,
+                                                                singular_rtol=singular_rtol))
 
 
 def borderline_readings(case, i, **kw):
@@ -345,8 +362,8 @@ def test_fault_free_prior_pl_is_closed_form():
     g, const, var, bnom, p, valid = pad(5, ring_zenith_rows(), np.zeros(5, int), np.ones(5),
                                         np.full(5, b), np.zeros(5))
     bud = budget()
-    res = protection_levels(g, const, var, var, bnom, p, np.zeros(2), bud, valid=valid,
-                                  max_order=1)
+    res = protection_levels(araim.Sources(g, const, var, var, bnom, p, valid), np.zeros(2), bud,
+                            araim.MHSSOptions(1))
     assert int(res.status) == Status.OK
     assert float(res.p_not_monitored) == 0.0
     sig_e, sig_u = 1.0 / np.sqrt(2.0 * c**2), np.sqrt(5.0 / (4.0 * (1.0 - s) ** 2))
@@ -356,7 +373,8 @@ def test_fault_free_prior_pl_is_closed_form():
     assert abs(float(res.vpl_m) - pl_u) <= PL_TOL_M
     assert float(res.sigma_acc_u_m) == pytest.approx(sig_u, rel=1e-12)
     assert float(res.emt_m) == 0.0  # no mode has prior >= P_EMT
-    o = ref.protection_levels_reference(g, const, var, var, bnom, p, np.zeros(2), bud, valid, 1)
+    o = ref.protection_levels_reference(araim.Sources(g, const, var, var, bnom, p, valid),
+                                        np.zeros(2), bud, ref.ReferenceOptions(max_order=1))
     assert o.hpl_m == pytest.approx(np.sqrt(2.0) * pl_e, abs=1e-5)
     assert o.vpl_m == pytest.approx(pl_u, abs=1e-5)
     # candidate modes: 5 singles (the zenith one singular: the ring alone cannot separate U from
@@ -375,8 +393,8 @@ def test_lone_sop_mode_closed_form():
                                            np.r_[np.ones(5), 9.0], np.zeros(6),
                                            np.r_[np.zeros(5), p])
     bud = budget()
-    res = protection_levels(g, const, var, var, bnom, psat, np.zeros(2), bud,
-                                  valid=valid, max_order=1)
+    res = protection_levels(araim.Sources(g, const, var, var, bnom, psat, valid), np.zeros(2), bud,
+                            araim.MHSSOptions(1))
     assert int(res.status) == Status.OK
     sig_e, sig_u = 1.0 / np.sqrt(2.0 * c**2), np.sqrt(5.0 / (4.0 * (1.0 - s) ** 2))
     pl_e = sig_e * -special.ndtri(bud.phmi_h / 2.0 / (2.0 + p))
@@ -405,8 +423,8 @@ def test_one_weighted_mode_pl_solves_the_equation():
     g, const, var, bnom, psat, valid = pad(7, g7, np.r_[np.zeros(5, int), 1, 1],
                                            np.r_[np.ones(5), v, v], np.zeros(7), np.zeros(7))
     bud = budget()
-    res = protection_levels(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
-                                  valid=valid, max_order=1)
+    res = protection_levels(araim.Sources(g, const, var, var, bnom, psat, valid),
+                            np.array([0.0, p]), bud, araim.MHSSOptions(1))
     assert int(res.status) == Status.OK
     assert int(res.n_modes) == 7
     assert float(res.p_not_monitored) == 0.0
@@ -426,8 +444,8 @@ def test_one_weighted_mode_pl_solves_the_equation():
     assert abs(pl[1] - pl_n) <= PL_TOL_M
     assert abs(pl[2] - pl_u) <= PL_TOL_M
     assert float(res.hpl_m) == pytest.approx(np.hypot(pl[0], pl[1]), rel=1e-12)
-    o = ref.protection_levels_reference(g, const, var, var, bnom, psat, np.array([0.0, p]), bud,
-                                        valid, 1)
+    o = ref.protection_levels_reference(araim.Sources(g, const, var, var, bnom, psat, valid),
+                                        np.array([0.0, p]), bud, ref.ReferenceOptions(max_order=1))
     assert o.n_modes == 7 and o.pl_enu_m == pytest.approx([pl_e, pl_n, pl_u], abs=1e-5)
 
 
@@ -523,15 +541,17 @@ def test_batch_shape_invariance():
     cases below, OK and failed ones mixed)."""
     cases = [_gps_only(8), _gps_only(4), _gps_only(7), _gps_only(8, p_const_gps=1e-6)]
     stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
-    flat = protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
-    shaped = protection_levels(*(a.reshape((2, 2) + a.shape[1:]) for a in stacked[:-1]),
-                                     budget(), valid=stacked[-1].reshape(2, 2, -1), max_order=1)
+    flat = protection_levels(araim.Sources(*stacked[:6], stacked[-1]), stacked[6], budget(),
+                             araim.MHSSOptions(1))
+    four = [a.reshape((2, 2) + a.shape[1:]) for a in stacked]
+    shaped = protection_levels(araim.Sources(*four[:6], four[7]), four[6], budget(),
+                               araim.MHSSOptions(1))
     for k in flat._fields:
         a, b = np.asarray(getattr(flat, k)), np.asarray(getattr(shaped, k))
         assert b.shape[:2] == (2, 2), k
         np.testing.assert_array_equal(b.reshape(a.shape), a, err_msg=k)
     for i, c in enumerate(cases):
-        one = protection_levels(*c[:-1], budget(), valid=c[-1], max_order=1)
+        one = protection_levels(araim.Sources(*c[:6], c[-1]), c[6], budget(), araim.MHSSOptions(1))
         for k in flat._fields:
             np.testing.assert_allclose(np.asarray(getattr(one, k)),
                                        np.asarray(getattr(flat, k))[i], rtol=1e-12, err_msg=k)
@@ -543,9 +563,9 @@ def test_broadcast_arguments(random_batch):
     full = dict(case)
     full["b_nom"] = np.full_like(case["b_nom"], 0.75)
     a = run_jax(full)
-    res = protection_levels(case["g"], case["constellation"], case["var_int"],
-                                  case["var_acc"], 0.75, case["p_sat"], P_CONST, budget(),
-                                  valid=case["valid"], max_order=3)
+    res = protection_levels(araim.Sources(case["g"], case["constellation"], case["var_int"],
+                                          case["var_acc"], 0.75, case["p_sat"], case["valid"]),
+                            P_CONST, budget(), araim.MHSSOptions(3))
     for k in a:
         np.testing.assert_array_equal(np.asarray(getattr(res, k)), a[k], err_msg=k)
 
@@ -577,21 +597,26 @@ def _assert_failed(res, status):
 def test_too_few_sources_is_inf_with_status_1():
     """4 GPS satellites: 3 + 1 states + 1 redundancy needed = 5 sources; also 0 sources."""
     args = _gps_only(4)
-    _assert_failed(protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+    _assert_failed(protection_levels(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                                     araim.MHSSOptions(1)),
                    Status.TOO_FEW_SOURCES)
     none = np.zeros(8, bool)
-    _assert_failed(protection_levels(*args[:-1], budget(), valid=none, max_order=1),
+    _assert_failed(protection_levels(araim.Sources(*args[:6], none), args[6], budget(),
+                                     araim.MHSSOptions(1)),
                    Status.TOO_FEW_SOURCES)
-    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    o = ref.protection_levels_reference(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                                        ref.ReferenceOptions(max_order=1))
     assert o.status == ref.TOO_FEW_SOURCES and o.hpl_m == np.inf
 
 
 def test_singular_all_in_view_is_inf_with_status_2():
     """Six satellites all at 40 deg elevation: up and clock columns are collinear."""
     args = _gps_only(6, el_deg=40.0)
-    _assert_failed(protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1),
+    _assert_failed(protection_levels(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                                     araim.MHSSOptions(1)),
                    Status.SINGULAR_GEOMETRY)
-    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    o = ref.protection_levels_reference(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                                        ref.ReferenceOptions(max_order=1))
     assert o.status == ref.SINGULAR_GEOMETRY
 
 
@@ -599,9 +624,11 @@ def test_unmet_p_thresh_is_inf_with_status_5():
     """GPS only with P_const = 1e-6 > P_thresh: the whole-GPS mode is singular (nothing left),
     so P_nm >= 1e-6 > 6e-8: UNMONITORED_RISK, P_nm still reported."""
     args = _gps_only(8, p_const_gps=1e-6)
-    res = protection_levels(*args[:-1], budget(), valid=args[-1], max_order=1)
+    res = protection_levels(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                            araim.MHSSOptions(1))
     _assert_failed(res, Status.UNMONITORED_RISK)
-    o = ref.protection_levels_reference(*args[:-1], budget(), args[-1], 1)
+    o = ref.protection_levels_reference(araim.Sources(*args[:6], args[-1]), args[6], budget(),
+                                        ref.ReferenceOptions(max_order=1))
     assert o.status == ref.UNMONITORED_RISK
     assert float(res.p_not_monitored) == pytest.approx(o.p_not_monitored, rel=1e-9)
     assert float(res.p_not_monitored) > 1e-6
@@ -612,11 +639,13 @@ def test_mixed_batch_failures_do_not_leak():
     status and the OK rows equal their single-geometry results."""
     cases = [_gps_only(8), _gps_only(4), _gps_only(6, el_deg=40.0), _gps_only(8, p_const_gps=1e-6)]
     stacked = [np.stack([c[k] for c in cases]) for k in range(8)]
-    res = protection_levels(*stacked[:-1], budget(), valid=stacked[-1], max_order=1)
+    res = protection_levels(araim.Sources(*stacked[:6], stacked[-1]), stacked[6], budget(),
+                            araim.MHSSOptions(1))
     np.testing.assert_array_equal(np.asarray(res.status), [0, 1, 2, 5])
     for k in res._fields:
         assert not np.any(np.isnan(np.asarray(getattr(res, k), float))), k
-    one = protection_levels(*cases[0][:-1], budget(), valid=cases[0][-1], max_order=1)
+    c0 = cases[0]
+    one = protection_levels(araim.Sources(*c0[:6], c0[7]), c0[6], budget(), araim.MHSSOptions(1))
     assert float(res.hpl_m[0]) == pytest.approx(float(one.hpl_m), abs=1e-9)
     assert np.isinf(np.asarray(res.hpl_m[1:])).all()
 
@@ -624,11 +653,11 @@ def test_mixed_batch_failures_do_not_leak():
 def test_bad_input_is_rejected_with_the_field_name():
     args = list(_gps_only(8))
     with pytest.raises(ValueError, match="var_int"):
-        protection_levels(args[0], args[1], -args[2], *args[3:-1], budget(),
-                                valid=args[-1], max_order=1)
+        protection_levels(araim.Sources(args[0], args[1], -args[2], *args[3:6], args[7]),
+                          args[6], budget(), araim.MHSSOptions(1))
     with pytest.raises(ValueError, match="p_sat"):
-        protection_levels(*args[:5], args[5] + 1.5, args[6], budget(), valid=args[-1],
-                                max_order=1)
+        protection_levels(araim.Sources(*args[:5], args[5] + 1.5, args[7]), args[6], budget(),
+                          araim.MHSSOptions(1))
 
 
 @pytest.mark.parametrize("name, value, match", [
@@ -651,23 +680,24 @@ def test_input_checks_see_valid_sources_only(name, value, match):
     for k in ("constellation", "var_int_m2", "var_acc_m2", "b_nom_m", "p_sat"):
         base[k] = np.stack([base[k]] * 3)
     base["valid"][1, 5] = False
-    prepare_inputs(*(base[k] for k in keys))  # the clean batch passes
-    clean = protection_levels(*(base[k] for k in keys[:7]), budget(), base["valid"],
-                                    max_order=1)
+    def sources(d):
+        return araim.Sources(*(d[k] for k in keys[:6]), d["valid"])
+
+    prepare_inputs(sources(base), base["p_const"])  # the clean batch passes
+    clean = protection_levels(sources(base), base["p_const"], budget(), araim.MHSSOptions(1))
     padded = {k: v.copy() for k, v in base.items()}
     padded[name][1, 5] = value
-    prepare_inputs(*(padded[k] for k in keys))  # at an invalid source: accepted
-    got = protection_levels(*(padded[k] for k in keys[:7]), budget(), padded["valid"],
-                                  max_order=1)
+    prepare_inputs(sources(padded), padded["p_const"])  # at an invalid source: accepted
+    got = protection_levels(sources(padded), padded["p_const"], budget(), araim.MHSSOptions(1))
     np.testing.assert_array_equal(np.asarray(got.hpl_m), np.asarray(clean.hpl_m))
     used = {k: v.copy() for k, v in base.items()}
     used[name][2, 3] = value
     with pytest.raises(ValueError, match=match):
-        prepare_inputs(*(used[k] for k in keys))
+        prepare_inputs(sources(used), used["p_const"])
     for max_order in (1, None):  # in the kernel, and on the host before required_order
         with pytest.raises(ValueError, match=match):
-            protection_levels(*(used[k] for k in keys[:7]), budget(), used["valid"],
-                                    max_order=max_order)
+            protection_levels(sources(used), used["p_const"], budget(),
+                              araim.MHSSOptions(max_order))
 
 
 def test_required_order_is_the_largest_per_geometry_order():
@@ -940,7 +970,7 @@ def test_bench_case_is_proved_by_the_taylor_step():
         mp.setattr(root, "FAST_EXTRA_ROUNDS", 0)
         # a new jitted function: the cached kernels were traced without these patches
         res = jit_kernel(lambda s, p_const: protection_levels_kernel(s, p_const, budget(),
-                                                                     max_order=1))(
+                                                                     araim.MHSSOptions(1)))(
             Sources(*(x[k] for k in Sources._fields)), x["p_const"])
     status = np.asarray(res.status)
     assert np.sum(status == Status.NOT_CONVERGED) <= 1
@@ -956,38 +986,41 @@ def test_threaded_split_is_bit_identical_to_one_call():
     from oaraim.bench import mhss_bench_inputs
 
     x = mhss_bench_inputs(6 * TILE + 37, seed=5)
-    args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
-                          x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
+    src, pc = prepare_inputs(araim.Sources(*(x[k] for k in araim.Sources._fields[:6]),
+                                           x["valid"]), x["p_const"])
+    args = (*src[:6], pc, src.valid)
     budget = araim.BUDGET_SEED004_TABLE_I
-    one = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
+    opts = araim.MHSSOptions(1, fault_modes=GROUPED)
+    one = protection_levels_threaded(src, pc, budget, opts, threads=1)
     # shapes compiled: 1573 (one call), 1024 (2 parts of 4 tiles), 768 (3 parts of 3 tiles,
     # and the unsplit 3-tile batch)
     for n, threads in ((6 * TILE + 37, 2), (6 * TILE + 37, 3), (3 * TILE, 2)):
-        part = tuple(a[:n] for a in args)
+        part = araim.Sources(*(a[:n] for a in src))
         ref = one if n == 6 * TILE + 37 else protection_levels_threaded(
-            part, budget, 1, threads=1, fault_modes=GROUPED)
-        got = protection_levels_threaded(part, budget, 1, threads=threads,
-                                         fault_modes=GROUPED)
+            part, pc[:n], budget, opts, threads=1)
+        got = protection_levels_threaded(part, pc[:n], budget, opts, threads=threads)
         for name, a, b in zip(got._fields, got, ref, strict=True):
             assert a.shape == b.shape and np.array_equal(np.asarray(a), np.asarray(b)), name
     assert np.all(np.isfinite(np.asarray(one.hpl_m)))
     # inside a caller's jit the split is skipped (threads cannot share a trace): same bits
     part = args  # 7 tiles: split into 2 parts were it not traced
-    jitted = jax.jit(lambda *a: protection_levels(*a[:7], budget, a[7], max_order=1,
-                                                        threads=2).hpl_m)(*part)
+    jitted = jax.jit(lambda *a: protection_levels(araim.Sources(*a[:6], a[7]), a[6], budget,
+                                                  araim.MHSSOptions(1), threads=2).hpl_m)(*part)
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(one.hpl_m), rtol=1e-12)
     with pytest.raises(ValueError, match="threads"):
-        protection_levels(*args[:7], budget, args[7], max_order=1, threads=0)
+        protection_levels(araim.Sources(*args[:6], args[7]), args[6], budget, araim.MHSSOptions(1),
+                          threads=0)
     # the public call: split over 2 threads with the kernel's input flags, same bits; a bad
     # value at a valid source of the second part is caught there and named by the host check
-    public = protection_levels(*args[:7], budget, args[7], max_order=1, threads=2)
+    public = protection_levels(araim.Sources(*args[:6], args[7]), args[6], budget,
+                               araim.MHSSOptions(1), threads=2)
     for name, a, b in zip(public._fields, public, one, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name
     bad = np.array(args[3])
     bad[6 * TILE + 3, 2] = -1.0
     with pytest.raises(ValueError, match="var_acc_m2"):
-        protection_levels(*args[:3], bad, *args[4:7], budget, args[7], max_order=1,
-                                threads=2)
+        protection_levels(araim.Sources(*args[:3], bad, *args[4:6], args[7]), args[6], budget,
+                          araim.MHSSOptions(1), threads=2)
 
 
 def test_kernel_compiler_options_change_no_bit():
@@ -1007,14 +1040,14 @@ def test_kernel_compiler_options_change_no_bit():
 
     assert KERNEL_COMPILER_OPTIONS  # else this compares a kernel with itself
     x = mhss_bench_inputs(6 * TILE + 37, seed=5)
-    args = prepare_inputs(x["g"], x["constellation"], x["var_int_m2"], x["var_acc_m2"],
-                          x["b_nom_m"], x["p_sat"], x["p_const"], x["valid"])
+    src, pc = prepare_inputs(Sources(*(x[k] for k in Sources._fields[:6]), x["valid"]),
+                             x["p_const"])
     budget = araim.BUDGET_SEED004_TABLE_I
-    got = protection_levels_threaded(args, budget, 1, threads=1, fault_modes=GROUPED)
+    opts = araim.MHSSOptions(1, fault_modes=GROUPED)
+    got = protection_levels_threaded(src, pc, budget, opts, threads=1)
     # a plain jax.jit around the kernel: XLA's default options (the kernel runs inline)
-    want = jax.jit(lambda s, p_const: protection_levels_kernel(
-        s, p_const, budget, max_order=1, fault_modes=GROUPED))(Sources(*args[:6], args[7]),
-                                                               args[6])
+    want = jax.jit(lambda s, p_const: protection_levels_kernel(s, p_const, budget, opts))(
+        src, pc)
     assert np.all(np.isfinite(np.asarray(want.hpl_m)))
     for name, a, b in zip(got._fields, got, want, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b)), name

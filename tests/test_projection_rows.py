@@ -12,6 +12,7 @@ import pytest
 
 from oaraim import araim
 from oaraim.araim.fault_modes import fault_mode_rule
+from oaraim.araim.mhss import MHSSOptions, Sources
 from oaraim.araim.mhss.entry import batch_last_inputs
 from oaraim.araim.mhss.projection import ModeRows, position_rows, project
 from oaraim.bench import mhss_bench_inputs
@@ -27,7 +28,8 @@ def test_rows_built_by_their_reader_are_the_projections(rule, order):
     fm = fault_mode_rule(rule)
 
     def proj(*a, lazy):
-        return project(*a, BUDGET, order, "int", fault_modes=fm, lazy_rows=lazy)
+        return project(Sources(*a[:6], a[7]), a[6], BUDGET, MHSSOptions(order, fault_modes=fm),
+                       lazy_rows=lazy)
 
     lazy = proj(*args, lazy=True)
     assert lazy.s_pos is None and isinstance(lazy.rows, ModeRows)

@@ -65,18 +65,18 @@ def test_a_registered_monitor_is_replayed_and_reported(toy):
     slope RAIM's result does not change because another monitor ran beside it."""
     x, tx, pr, valid = _sky(1)
     var = np.ones(valid.shape)
-    alone = snapshot.replay(pr, tx, var, var, valid, x,
+    alone = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                             config=snapshot.ReplayConfig(monitors=(toy.name,)))
     assert alone.slope is None and alone.mhss is None and alone.max_order == 0
     m = alone.monitors[toy.name]
     assert np.all(np.isfinite(m.hpl_m)) and np.all(m.hpe_m < m.hpl_m)
     # one clock: the toy's VPL / K is the all-in-view vertical sigma, which the slope RAIM
     # statistic does not give; compare with the MHSS accuracy sigma instead (C_acc = C_int)
-    both = snapshot.replay(pr, tx, var, var, valid, x,
+    both = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                            config=snapshot.ReplayConfig(monitors=("slope", "mhss", toy.name)))
     np.testing.assert_allclose(both.monitors[toy.name].vpl_m / K_TOY, both.mhss.sigma_acc_u_m,
                                rtol=1e-9)
-    slope_only = snapshot.replay(pr, tx, var, var, valid, x,
+    slope_only = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                                  config=snapshot.ReplayConfig(monitors=("slope",)))
     np.testing.assert_array_equal(both.slope.hpl_m, slope_only.slope.hpl_m)
     metrics = snapshot.replay_metrics(both)
@@ -93,7 +93,7 @@ def test_a_monitor_without_detection_misleads_under_a_fault(toy):
     pr = pr.copy()
     pr[:10, 4] += 150.0
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x,
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                         config=snapshot.ReplayConfig(monitors=("slope", toy.name)))
     metrics = snapshot.replay_metrics(r)
     assert metrics[f"misleading_information_epochs_{toy.name}"] >= 5
@@ -105,7 +105,7 @@ def test_unknown_or_duplicate_monitors_are_refused_with_one_line(toy):
     x, tx, pr, valid = _sky(7)
     var = np.ones(valid.shape)
     with pytest.raises(ValueError, match="toy-covariance.*register_monitor"):
-        snapshot.replay(pr, tx, var, var, valid, x,
+        snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                         config=snapshot.ReplayConfig(monitors=("filter",)))
     with pytest.raises(ValueError, match="registered already"):
         snapshot.register_monitor(CovarianceMonitor())

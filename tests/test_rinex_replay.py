@@ -307,7 +307,7 @@ def test_measurement_model_recovers_position_to_a_millimetre(station):
                                      tgd_at(extras, syn.sv, syn.t_gps_s))
     v = inp["valid"]
     no_sagnac = araim.wnls(np.where(v, inp["pseudorange_m"] + inp["correction_m"], 0.0),
-                           sat.ecef_tx_m, 1.0, x0_m=x, valid=v)
+                           sat.ecef_tx_m, 1.0, x, v)
     assert np.median(np.linalg.norm(np.asarray(no_sagnac.position_m) - x, axis=-1)) > 2.0
 
 

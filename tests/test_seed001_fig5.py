@@ -32,8 +32,8 @@ def test_kernel_matches_numpy_oracle():
     az, el, valid = f5.compact(az, el, valid, 12)
     table = np.asarray(f5.lambda_det_table(1e-5, 1e-3, 12 + 5 - 4))
     keys = f5._epoch_keys_fn(4)(jax.random.key(0), np.arange(3, dtype=np.uint32))
-    hg, hs = f5.fig5_kernel(keys, az[:3], el[:3], valid[:3], table, 5, 1.0, 2.0, 5.0, 3000.0,
-                            0.0, 0.0)
+    hg, hs = f5.fig5_kernel(keys, (az[:3], el[:3], valid[:3]), table, 5, (1.0, 2.0),
+                            f5.BppAnnulus(5.0, 3000.0, 0.0, 0.0))
     for e in range(3):
         v = valid[e]
         g = np.asarray(geometry.geometry_rows(az[e][v], el[e][v]))

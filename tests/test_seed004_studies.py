@@ -5,7 +5,6 @@ CLI path; here: the studies compute what they claim (against the public MHSS API
 checkable helpers, and the paper's statements at reduced size.
 """
 
-from functools import partial
 
 import jax
 import numpy as np
@@ -16,10 +15,11 @@ from oaraim.registry import STUDIES
 from oaraim.studies.common import seed004 as c
 from oaraim.studies.common.seed004 import Fig4Cell
 from oaraim.studies.seed004_fig4 import largest_reducing_sigma, monotone_share
+from tests.test_mhss import grouped
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-protection_levels = partial(araim.protection_levels, fault_modes="grouped")
+protection_levels = grouped(araim.protection_levels)
 
 
 def test_receiver_is_orange_county():
@@ -76,18 +76,13 @@ def test_fig4_cell_matches_public_protection_levels(cell):
     az_s = np.stack([np.asarray(x.az_rad) for x in tw])
     el_s = np.stack([np.asarray(x.el_rad) for x in tw])
     vi, va = (np.asarray(x) for x in errors.gnss_variances(el, 1.0))
-    gps = protection_levels(geometry.geometry_rows(az, el), np.zeros(az.shape, int), vi,
-                                  va, 0.75, 1e-5, [1e-8], araim.BUDGET_SEED004_TABLE_I,
-                                  valid=valid)
+    gps_sources = araim.Sources(geometry.geometry_rows(az, el), np.zeros(az.shape, int), vi, va,
+                                0.75, 1e-5, valid)
+    gps = protection_levels(gps_sources, [1e-8], araim.BUDGET_SEED004_TABLE_I)
     si, sa = errors.sop_variances(np.full(az_s.shape, 3.0))
-    both = protection_levels(
-        geometry.geometry_rows(np.concatenate([az, az_s], -1), np.concatenate([el, el_s], -1)),
-        np.concatenate([np.zeros(az.shape, int), np.ones(az_s.shape, int)], -1),
-        np.concatenate([vi, si], -1), np.concatenate([va, sa], -1),
-        np.concatenate([np.full(az.shape, 0.75), np.zeros(az_s.shape)], -1),
-        np.concatenate([np.full(az.shape, 1e-5), np.full(az_s.shape, 1e-3)], -1),
-        [1e-8, 1e-4], araim.BUDGET_SEED004_TABLE_I,
-        valid=np.concatenate([valid, np.ones(az_s.shape, bool)], -1))
+    sops = araim.Sources(geometry.geometry_rows(az_s, el_s), 1, si, sa, 0.0, 1e-3)
+    both = protection_levels(gps_sources.concat(sops), [1e-8, 1e-4],
+                             araim.BUDGET_SEED004_TABLE_I)
     hg, hs = np.asarray(gps.hpl_m), np.asarray(both.hpl_m)
     fin = np.isfinite(hg) & np.isfinite(hs)
     np.testing.assert_array_equal(out["both_finite"][:n], fin)

@@ -78,9 +78,8 @@ src = Sources(*(jnp.asarray(x[k]) for k in Sources._fields))
 p_const = jnp.asarray(x["p_const"])
 TABLE_I = araim.BUDGET_SEED004_TABLE_I
 GROUPED = araim.FaultModeRule("grouped")
-ORDER = dict(max_order=1, fault_modes=GROUPED)
-host = (src.g, src.constellation, src.var_int_m2, src.var_acc_m2, src.b_nom_m, src.p_sat,
-        p_const, TABLE_I)
+ORDER = araim.MHSSOptions(1, fault_modes=GROUPED)
+host = (src, p_const, TABLE_I)
 y = jnp.zeros((B, L))
 g, sig, valid = src.g, jnp.sqrt(src.var_int_m2), src.valid
 table = jnp.asarray(araim.lambda_det_table(1e-3, 1e-3, L))
@@ -118,32 +117,34 @@ replayed = {}
 
 
 def replay():
-    replayed["r"] = araim.replay(pr[:, :8], tx[:, :8], 4.0, 4.0, np.ones((4, 8), bool), rx,
+    replayed["r"] = araim.replay(pr[:, :8], tx[:, :8],
+                                 araim.ReplaySources(4.0, 4.0, np.ones((4, 8), bool)), rx,
                                  x0_m=rx + 100.0)
     return replayed["r"]
 
 
 CALLS = {
     "araim": {
-        "protection_levels": lambda: araim.protection_levels(*host, src.valid, **ORDER),
+        "protection_levels": lambda: araim.protection_levels(*host, ORDER),
         "protection_levels_kernel": lambda: araim.protection_levels_kernel(
-            src, p_const, TABLE_I, **ORDER),
+            src, p_const, TABLE_I, ORDER),
         "protection_levels_priors_kernel": lambda: araim.protection_levels_priors_kernel(
             src._replace(p_sat=jnp.stack([src.p_sat, 2 * src.p_sat])),
-            jnp.stack([p_const, p_const]), TABLE_I, **ORDER),
-        "switch_flags_kernel": lambda: araim.switch_flags_kernel(src, p_const, TABLE_I, **ORDER),
-        "solution_separation": lambda: araim.solution_separation(*host, y, src.valid, **ORDER),
-        "detect_and_exclude": lambda: araim.detect_and_exclude(*host, y, src.valid, **ORDER),
-        "separation_kernel": lambda: araim.separation_kernel(src, p_const, TABLE_I, y, **ORDER),
+            jnp.stack([p_const, p_const]), TABLE_I, ORDER),
+        "switch_flags_kernel": lambda: araim.switch_flags_kernel(src, p_const, TABLE_I, ORDER),
+        "solution_separation": lambda: araim.solution_separation(*host, y, ORDER),
+        "detect_and_exclude": lambda: araim.detect_and_exclude(*host, y, ORDER),
+        "separation_kernel": lambda: araim.separation_kernel(src, p_const, TABLE_I, y, ORDER),
         "detect_and_exclude_kernel": lambda: araim.detect_and_exclude_kernel(
-            src, p_const, TABLE_I, y, **ORDER),
+            src, p_const, TABLE_I, y, ORDER),
         "required_order": lambda: araim.required_order(src.valid, src.constellation, src.p_sat,
                                                        p_const, TABLE_I, fault_modes=GROUPED),
         "fault_modes_batch_last": lambda: araim.fault_modes_batch_last(
             src.valid.T, src.constellation.T, src.p_sat.T, p_const.T, 1e-8, 1),
         "fault_mode_rule": lambda: araim.fault_mode_rule("grouped"),
         "epoch_protection_levels": lambda: araim.epoch_protection_levels(
-            40.0, 5.0, 100.0, 1.3e9, max_order=1),
+            40.0, 5.0, 100.0, 1.3e9,
+            options=araim.EpochOptions(mhss=araim.MHSSOptions(1))),
         "exposure_probability": lambda: araim.exposure_probability(1e-5, 3600.0, 3600),
         "detection_threshold": lambda: araim.detection_threshold(1e-3, 3),
         "noncentrality": lambda: araim.noncentrality(1e-3, 1e-3, 3),
@@ -272,8 +273,7 @@ except jaxtyping.TypeCheckError as e:
 WRONG = {
     "sigma_m": lambda: araim.slopes(np.asarray(g), np.ones(L + 1)),
     "tx_pos_m": lambda: araim.wnls(pr, tx[..., :2], 1.0),
-    "p_const": lambda: araim.protection_levels(*host[:6], np.ones((B + 1, C)), TABLE_I,
-                                               **ORDER),
+    "p_const": lambda: araim.protection_levels(src, np.float64(1e-8), TABLE_I, ORDER),
     "tx_pos": lambda: araim.ekf_update(state, z6, jnp.ones(6, bool), tw[:, :2], jnp.zeros(6),
                                        1.0),
     "tx_enu_m": lambda: geometry.geometry_rows_enu(np.ones((2, 5, 4))),

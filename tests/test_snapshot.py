@@ -159,7 +159,7 @@ def _sky(seed, n_sats=9, n_slots=L, n_epochs=B, sigma=1.0):
 def test_replay_fault_free_and_padding_invariance():
     x, tx, pr, valid = _sky(1)
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x)
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x)
     assert np.all(r.wnls.status == araim.Status.OK)
     assert np.all(np.isfinite(r.hpe_m)) and np.median(r.hpe_m) < 3.0
     assert np.all(np.isfinite(r.slope.hpl_m)) and np.all(np.isfinite(r.mhss.hpl_m))
@@ -171,7 +171,7 @@ def test_replay_fault_free_and_padding_invariance():
     pr2, tx2 = pr.copy(), tx.copy()
     pr2[~valid] = np.nan
     tx2[~valid] = np.inf
-    r2 = snapshot.replay(pr2, tx2, var, var, valid, x)
+    r2 = snapshot.replay(pr2, tx2, snapshot.ReplaySources(var, var, valid), x)
     np.testing.assert_array_equal(r.hpe_m, r2.hpe_m)
     np.testing.assert_array_equal(r.slope.hpl_m, r2.slope.hpl_m)
     np.testing.assert_array_equal(r.mhss.hpl_m, r2.mhss.hpl_m)
@@ -180,7 +180,7 @@ def test_replay_fault_free_and_padding_invariance():
 def test_group_slopes_one_clock_equals_araim_slope_hpl():
     x, tx, pr, valid = _sky(2)
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x,
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
                         config=snapshot.ReplayConfig(p_fa=1e-5, p_md=1e-3))
     ref = araim.slope_hpl(r.g_enu, 1.0, p_fa=1e-5, p_md=1e-3, valid=r.used)
     np.testing.assert_allclose(r.slope.hpl_all_in_view_m, ref.hpl_m, rtol=1e-10)
@@ -193,7 +193,7 @@ def test_replay_detects_and_excludes_a_faulty_satellite():
     pr = pr.copy()
     pr[:10, 4] += 150.0
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x)
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x)
     for m in (r.slope, r.mhss):
         assert np.all(m.detected[:10]) and not np.any(m.detected[10:])
         assert np.all(np.argmax(m.excluded[:10], -1) == 4)
@@ -215,7 +215,7 @@ def test_replay_failures_are_inf_not_nan():
     valid[5:10] = False
     valid[5:10, :4] = True  # 4 sources: a solution without redundancy
     var = np.ones(valid.shape)
-    r = snapshot.replay(pr, tx, var, var, valid, x)
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x)
     for a in (r.hpe_m, r.slope.hpl_m, r.mhss.hpl_m, r.slope.vpl_m, r.mhss.vpl_m):
         assert not np.any(np.isnan(a))
     assert np.all(np.isinf(r.hpe_m[:5])) and np.all(np.isinf(r.mhss.hpl_m[:10]))
@@ -250,8 +250,8 @@ def test_replay_gnss_plus_sop_clock_groups_slope():
     only: the two-group MHSS compiles for another ~30 s; see the slow test below.)"""
     x, tx, pr, valid, cons, rng = _gnss_plus_sop(5)
     var_int = np.where(cons == 1, 9.0, 1.0)
-    r = snapshot.replay(pr, tx, var_int, var_int, valid, x, constellation=cons,
-                        p_const=(1e-8, 1e-4), x0_m=x + 100.0,
+    r = snapshot.replay(pr, tx, snapshot.ReplaySources(var_int, var_int, valid, constellation=cons),
+                        x, p_const=(1e-8, 1e-4), x0_m=x + 100.0,
                         config=snapshot.ReplayConfig(monitors=("slope",)))
     assert r.mhss is None and r.max_order == 0
     assert np.all(r.wnls.status == araim.Status.OK)
@@ -261,7 +261,8 @@ def test_replay_gnss_plus_sop_clock_groups_slope():
     assert np.all(np.isfinite(r.slope.hpl_m)) and not np.any(r.slope.detected)
     pr[:20, 9] += 60.0
     noisy = pr + np.where(valid, rng.normal(0.0, 0.3, pr.shape), 0.0)
-    r = snapshot.replay(noisy, tx, var_int, var_int, valid, x, constellation=cons,
+    r = snapshot.replay(noisy, tx,
+                        snapshot.ReplaySources(var_int, var_int, valid, constellation=cons), x,
                         p_const=(1e-8, 1e-4), x0_m=x + 100.0,
                         config=snapshot.ReplayConfig(monitors=("slope",)))
     assert np.all(r.slope.detected[:20]) and not np.any(r.slope.detected[20:])
@@ -278,11 +279,12 @@ def test_replay_gnss_plus_sop_clock_groups_mhss():
     constellation. Slow: ~30-45 s of compilation for the two-group MHSS with exclusion."""
     x, tx, pr, valid, cons, rng = _gnss_plus_sop(5)
     var_int = np.where(cons == 1, 9.0, 1.0)
-    kw = dict(constellation=cons, p_const=(1e-8, 1e-4), p_sat=np.where(cons == 1, 1e-4, 1e-5),
-              b_nom_m=np.where(cons == 1, 0.0, 0.75), x0_m=x + 100.0)
+    sources = snapshot.ReplaySources(var_int, var_int, valid, constellation=cons,
+                                     p_sat=np.where(cons == 1, 1e-4, 1e-5),
+                                     b_nom_m=np.where(cons == 1, 0.0, 0.75))
     pr[:20, 9] += 60.0
     noisy = pr + np.where(valid, rng.normal(0.0, 0.3, pr.shape), 0.0)
-    r = snapshot.replay(noisy, tx, var_int, var_int, valid, x, **kw)
+    r = snapshot.replay(noisy, tx, sources, x, (1e-8, 1e-4), x0_m=x + 100.0)
     assert r.max_order == 1
     for m in (r.slope, r.mhss):
         assert np.all(m.detected[:20]) and not np.any(m.detected[20:])
@@ -295,12 +297,16 @@ def test_replay_rejects_bad_input():
     x, tx, pr, valid = _sky(7)
     var = np.ones(valid.shape)
     with pytest.raises(ValueError, match="var_int_m2"):
-        snapshot.replay(pr, tx, -var, var, valid, x)
+        snapshot.replay(pr, tx, snapshot.ReplaySources(-var, var, valid), x)
     with pytest.raises(ValueError, match="p_fa"):
-        snapshot.replay(pr, tx, var, var, valid, x, config=snapshot.ReplayConfig(p_fa=2.0))
+        snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
+                        config=snapshot.ReplayConfig(p_fa=2.0))
     with pytest.raises(ValueError, match="constellation"):
-        snapshot.replay(pr, tx, var, var, valid, x, constellation=np.full(valid.shape, 3))
+        snapshot.replay(pr, tx,
+                        snapshot.ReplaySources(var, var, valid,
+                                               constellation=np.full(valid.shape, 3)), x)
     with pytest.raises(ValueError, match="frame"):
-        snapshot.replay(pr, tx, var, var, valid, x, config=snapshot.ReplayConfig(frame="ned"))
+        snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x,
+                        config=snapshot.ReplayConfig(frame="ned"))
     with pytest.raises(ValueError, match="config must be an araim.snapshot.ReplayConfig"):
-        snapshot.replay(pr, tx, var, var, valid, x, config={"frame": "enu"})
+        snapshot.replay(pr, tx, snapshot.ReplaySources(var, var, valid), x, config={"frame": "enu"})

@@ -56,7 +56,8 @@ def test_fig4_kernel_matches_numpy_oracle():
     keys = mc.realization_keys(5, 0, 0, 64)
     args = dict(n_gps=5, n_added=4, mask_rad=np.deg2rad(15.0), d_min_m=5.0, d_max_m=3000.0,
                 h_min_m=0.0, h_max_m=0.0)
-    out = seed001_fig4.fig4_kernel(keys, sigma_gps_m=1.0, sigma_sop_m=2.0, **args)
+    out = seed001_fig4.fig4_kernel(keys, args["n_gps"], args["n_added"], args["mask_rad"],
+                                   (1.0, 2.0), seed001_fig4.BppAnnulus(5.0, 3000.0, 0.0, 0.0))
     for i, key in enumerate(keys):
         az, el, az_g, el_g, az_s, el_s = (np.asarray(a) for a in seed001_fig4.draw(key, **args))
         assert np.all(el_s == 0.0)

@@ -16,7 +16,6 @@ Old and new systems share one compiled shape: L = 13 (12 GPS slots + the SOP slo
 the old system), C = 2.
 """
 
-from functools import partial
 
 import jax
 import numpy as np
@@ -27,10 +26,11 @@ from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
 from oaraim.araim import Status
 from oaraim.errors import gnss_variances, sop_variances
+from tests.test_mhss import grouped
 
 # these tests check the grouped convention (seed 004's SOP studies) against the grouped
 # oracle; the ADD conventions are tested in test_conformance.py
-solution_separation = partial(araim.solution_separation, fault_modes="grouped")
+solution_separation = grouped(araim.solution_separation)
 
 N_GEOM = 1000  # >= 1000 random geometries
 L = 13
@@ -85,7 +85,8 @@ def theorem_cases(seed, n):
 
 
 def _args(c):
-    return (c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"], c["p_sat"],
+    return (araim.Sources(c["g"], c["constellation"], c["var_int"], c["var_acc"], c["b_nom"],
+                          c["p_sat"], c["valid"]),
             c["p_const"], araim.BUDGET_SEED004_TABLE_I, c["residual"])
 
 
@@ -103,8 +104,8 @@ def _np(res):
 @pytest.fixture(scope="module")
 def systems():
     old, new = theorem_cases(20040, N_GEOM)
-    s_old = _np(solution_separation(*_args(old), valid=old["valid"], max_order=1))
-    s_new = _np(solution_separation(*_args(new), valid=new["valid"], max_order=1))
+    s_old = _np(solution_separation(*_args(old), araim.MHSSOptions(1)))
+    s_new = _np(solution_separation(*_args(new), araim.MHSSOptions(1)))
     return old, new, s_old, s_new
 
 
@@ -192,9 +193,12 @@ def test_theorems_hold_for_the_oracle_too(systems):
     old, new, s_old, s_new = systems
     bud = araim.BUDGET_SEED004_TABLE_I
     for i in range(0, N_GEOM, 10):
-        ro, rn = (ref.solution_separation_reference(
-            c["g"][i], c["constellation"][i], c["var_int"][i], c["var_acc"][i], c["b_nom"][i],
-            c["p_sat"][i], c["p_const"][i], bud, c["residual"][i], c["valid"][i], 1)
+        ro, rn = (ref.solution_separation_reference(araim.Sources(c["g"][i], c["constellation"][i],
+                                                                  c["var_int"][i], c["var_acc"][i],
+                                                                  c["b_nom"][i], c["p_sat"][i],
+                                                                  c["valid"][i]), c["p_const"][i],
+                                                    bud, c["residual"][i],
+                                                    ref.ReferenceOptions(max_order=1))
             for c in (old, new))
         assert rn.result.n_modes == ro.result.n_modes + 1
         assert rn.result.hpl_m >= ro.result.hpl_m - 1e-5  # bisection to 1e-6 m

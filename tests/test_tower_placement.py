@@ -49,8 +49,7 @@ def test_no_tower_is_the_gps_only_hpl(problem):
     (same sky, Table I) to 1e-9 m."""
     h = problem.hpls(np.zeros((1, 3, 3)), np.zeros((1, 3), bool))[0]
     sky = problem.sky
-    hg, _, _, _, _ = c.mhss(tp.geometry.geometry_rows(sky["az_rad"], sky["el_rad"]),
-                            c.gps_inputs(sky["el_rad"], sky["valid"]),
+    hg, _, _, _, _ = c.mhss(c.gps_sources(sky["az_rad"], sky["el_rad"], sky["valid"]),
                             jnp.array([c.P_CONST_GPS]), 1)
     want = np.tile(np.asarray(hg), problem.receivers.shape[0])
     assert np.isfinite(want).all()

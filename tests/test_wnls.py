@@ -178,7 +178,7 @@ def _two_constellations(rng):
 
 def test_two_clock_groups_recovered():
     tx, clock_index, clocks, pr = _two_constellations(np.random.default_rng(5))
-    res = araim.wnls(pr, tx, 1.0, clock_index=clock_index, n_clocks=2)
+    res = araim.wnls(pr, tx, 1.0, clock_index=clock_index, options=araim.WNLSOptions(n_clocks=2))
     np.testing.assert_array_equal(res.status, Status.OK)
     assert res.clock_m.shape == (B, 2)
     assert res.covariance_m2.shape == (B, 5, 5)
@@ -192,7 +192,8 @@ def test_clock_group_without_valid_source():
     at the initial value, the solve is not singular and the dof counts one clock."""
     tx, clock_index, clocks, pr = _two_constellations(np.random.default_rng(6))
     valid = clock_index == 0  # every clock-1 source invalid
-    res = araim.wnls(pr, tx, 1.0, valid=valid, clock_index=clock_index, n_clocks=2)
+    res = araim.wnls(pr, tx, 1.0, valid=valid, clock_index=clock_index,
+                     options=araim.WNLSOptions(n_clocks=2))
     np.testing.assert_array_equal(res.status, Status.OK)
     np.testing.assert_allclose(res.position_m, np.broadcast_to(RX_MDSCC, (B, 3)), rtol=0, atol=1e-6)
     np.testing.assert_allclose(res.clock_m[:, 0], clocks[:, 0], rtol=0, atol=1e-6)
@@ -201,12 +202,13 @@ def test_clock_group_without_valid_source():
     assert np.all(np.isfinite(np.asarray(res.covariance_m2)[:, :4, :4]))
     # with an explicit initial clock for the empty group, that value is kept
     x0 = np.r_[0.0, 0.0, 0.0, 0.0, 77.0]
-    res2 = araim.wnls(pr, tx, 1.0, x0_m=x0, valid=valid, clock_index=clock_index, n_clocks=2)
+    res2 = araim.wnls(pr, tx, 1.0, x0, valid, clock_index, araim.WNLSOptions(n_clocks=2))
     np.testing.assert_array_equal(res2.status, Status.OK)
     np.testing.assert_array_equal(res2.clock_m[:, 1], 77.0)
     np.testing.assert_allclose(res2.position_m, res.position_m, rtol=0, atol=1e-6)
     # all sources on clock 0 (group 1 simply unused) behaves the same way
-    res3 = araim.wnls(pr, tx, 1.0, valid=valid, clock_index=np.zeros(L, int), n_clocks=2)
+    res3 = araim.wnls(pr, tx, 1.0, valid=valid, clock_index=np.zeros(L, int),
+                      options=araim.WNLSOptions(n_clocks=2))
     np.testing.assert_array_equal(res3.status, Status.OK)
     np.testing.assert_allclose(res3.position_m, res.position_m, rtol=0, atol=1e-6)
     np.testing.assert_array_equal(res3.clock_m[:, 1], 0.0)
@@ -316,14 +318,14 @@ def test_not_converged_with_one_iteration():
     pr = _pseudoranges(RX_MDSCC, tx, 1234.0)
     x0 = np.zeros((B, 4))  # the Earth's centre: 6400 km from the receiver
     x0[B // 2 :] = np.r_[RX_MDSCC, 1234.0]  # the exact solution: the step is zero
-    res = araim.wnls(pr, tx, 1.0, x0_m=x0, n_iter=1)
+    res = araim.wnls(pr, tx, 1.0, x0, options=araim.WNLSOptions(n_iter=1))
     _no_nan(res)
     np.testing.assert_array_equal(res.status[: B // 2], Status.NOT_CONVERGED)
     assert np.all(np.asarray(res.last_step_m)[: B // 2] > 1e3)
     np.testing.assert_array_equal(res.status[B // 2 :], Status.OK)
     np.testing.assert_allclose(res.position_m[B // 2 :], x0[B // 2 :, :3], rtol=0, atol=1e-6)
     # the same epochs with the default 10 iterations converge
-    res10 = araim.wnls(pr, tx, 1.0, x0_m=x0)
+    res10 = araim.wnls(pr, tx, 1.0, x0)
     np.testing.assert_array_equal(res10.status, Status.OK)
 
 

@@ -45,13 +45,13 @@ def outputs():
     for case, (inputs, budget_name, _, rule0) in MHSS_CASES.items():
         x = inputs(2048)
         budget = getattr(araim, budget_name)
-        args = [x[k] for k in ("g", "constellation", "var_int_m2", "var_acc_m2", "b_nom_m",
-                               "p_sat", "p_const")]
+        sources = araim.Sources(*(x[k] for k in ("g", "constellation", "var_int_m2",
+                                                 "var_acc_m2", "b_nom_m", "p_sat", "valid")))
         for rule in sorted({rule0, *RULES}):
             for order in (1, 2):
                 try:
-                    r = araim.protection_levels(*args, budget, x["valid"], max_order=order,
-                                                fault_modes=rule)
+                    r = araim.protection_levels(sources, x["p_const"], budget,
+                                                araim.MHSSOptions(order, fault_modes=rule))
                 except ValueError:  # an order the convention does not enumerate
                     continue
                 for k, v in r._asdict().items():

@@ -2,8 +2,9 @@
 
 A small package, one concern per module:
 
-- ``inputs``: the ``Sources`` pytree, the host's argument checks and the kernel's own
-  (``Status.INVALID_INPUT``);
+- ``inputs``: the ``Sources`` pytree (with ``concat``, ``pad`` and ``select`` for the
+  studies), the host's argument checks and the kernel's own (``Status.INVALID_INPUT``);
+- ``options``: ``MHSSOptions``, the static options every entry point takes as one object;
 - ``orders``: the fault-mode order a batch needs (``required_order``);
 - ``projection``: every fault mode's fault-tolerant solution, sigmas, biases, separations and
   thresholds (eqs. 8-12, ``project``);
@@ -24,6 +25,7 @@ from oaraim.araim.mhss.entry import (
     MHSSResult,
     batch_last_inputs,
     kernel_cache_size,
+    kernel_options,
     protection_levels,
     protection_levels_kernel,
     protection_levels_priors_kernel,
@@ -38,6 +40,7 @@ from oaraim.araim.mhss.inputs import (
     host_inputs,
     prepare_inputs,
 )
+from oaraim.araim.mhss.options import MHSSOptions, as_options
 from oaraim.araim.mhss.orders import MAX_AUTO_ORDER, higher_order_flags, required_order
 from oaraim.araim.mhss.projection import (
     SINGLE_REDUNDANCY_TOLERANCE,
@@ -74,6 +77,7 @@ __all__ = [
     "FAST_EXTRA_ROUNDS",
     "FAST_PROOF_TOL_M",
     "MAX_AUTO_ORDER",
+    "MHSSOptions",
     "MHSSResult",
     "NEWTON_STEP_TOL_M",
     "PL_ITERATIONS",
@@ -91,6 +95,7 @@ __all__ = [
     "Sources",
     "UNIT_ROW_TOLERANCE",
     "ZERO_SEPARATION_RTOL",
+    "as_options",
     "batch_last_inputs",
     "check_inputs",
     "check_options",
@@ -98,6 +103,7 @@ __all__ = [
     "host_inputs",
     "implicit_root",
     "kernel_cache_size",
+    "kernel_options",
     "pls_from_projection",
     "prepare_inputs",
     "project",

@@ -12,15 +12,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
-from jaxtyping import Bool, Float, Int, Real
+from jaxtyping import Float, Real
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
-    DEFAULT_RULE,
-    FaultModeRule,
-    check_order,
-    fault_mode_rule,
     select_fault_modes,
     to_batch_first,
     to_batch_last,
@@ -35,6 +31,7 @@ from oaraim.araim.mhss.inputs import (
     invalid_input_flags,
     prepare_inputs,
 )
+from oaraim.araim.mhss.options import MHSSOptions, as_options
 from oaraim.araim.mhss.orders import higher_order_flags, required_order
 from oaraim.araim.mhss.projection import (
     adjusted_projection,
@@ -43,8 +40,7 @@ from oaraim.araim.mhss.projection import (
     position_rows,
     project,
 )
-from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
-from oaraim.araim.position_opt import PositionOptimization, check_position_optimization
+from oaraim.araim.mhss.root import pls_from_projection
 from oaraim.araim.status import Status
 from oaraim.araim.validate import check_int
 from oaraim.batching import (
@@ -59,7 +55,8 @@ from oaraim.batching import (
     unpad,
 )
 
-__all__ = ["MHSSResult", "batch_last_inputs", "kernel_cache_size", "protection_levels",
+__all__ = ["MHSSResult", "batch_last_inputs", "kernel_cache_size", "kernel_options",
+           "protection_levels",
            "protection_levels_kernel", "protection_levels_priors_kernel",
            "protection_levels_threaded"]
 
@@ -185,25 +182,25 @@ def _result(pr, pl, status, emt, sigma_acc_u, adjusted):
 
 
 def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
-                            budget, max_order, all_in_view_weighting, iterations,
-                            input_flags=False, fault_modes=DEFAULT_RULE,
-                            position_optimization=None, order_flags=False):
-    """One flat batch (B, ...) in and out; batch-last inside. ``input_flags``: returns
-    (MHSSResult, ``invalid_input_flags``); ``order_flags`` (with ``input_flags``) also
-    ``higher_order_flags``: (MHSSResult, input flags, order flags)."""
+                            budget, options, input_flags=False, order_flags=False):
+    """One flat batch (B, ...) in and out; batch-last inside; ``options`` checked, with an
+    int order. ``input_flags``: returns (MHSSResult, ``invalid_input_flags``);
+    ``order_flags`` (with ``input_flags``) also ``higher_order_flags``: (MHSSResult, input
+    flags, order flags)."""
     args = batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
-    more = higher_order_flags(args[7], args[1], args[5], args[6], budget, fault_modes, max_order) \
-        if order_flags else None
-    pr = project(*args, budget, max_order, all_in_view_weighting, input_flags=input_flags,
-                  fault_modes=fault_modes, lazy_rows=position_optimization is not None)
-    if input_flags:
-        pr, flags = pr
-    pl, status, emt = pls_from_projection(pr, budget, iterations)
+    more = higher_order_flags(args[7], args[1], args[5], args[6], budget, options.fault_modes,
+                              options.max_order) if order_flags else None
+    opt = options.position_optimization
+    pr = project(Sources(*args[:6], args[7]), args[6], budget, options,
+                 lazy_rows=opt is not None)
+    flags = pr.invalid_input
+    pl, status, emt = pls_from_projection(pr, budget, options.iterations)
     sigma_acc_u = pr.sigma_acc_u
     adjusted = jnp.zeros_like(status, dtype=bool)
-    if position_optimization is not None:
+    if opt is not None:
         pl, status, emt, sigma_acc_u, adjusted = _optimized_position(
-            pr, pl, status, emt, args, budget, iterations, position_optimization)
+            pr._replace(invalid_input=None), pl, status, emt, args, budget, options.iterations,
+            opt)
     out = _result(pr, pl, status, emt, sigma_acc_u, adjusted)
     if order_flags:
         return out, flags, more
@@ -211,9 +208,7 @@ def _protection_levels_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_
 
 
 def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid,
-                       budget, max_order, all_in_view_weighting="int", iterations=PL_ITERATIONS,
-                       input_flags=False, fault_modes=DEFAULT_RULE,
-                       position_optimization=None, order_flags=False):
+                       budget, options, input_flags=False, order_flags=False):
     """Batch-first in and out, every argument broadcast to g's batch shape; evaluated in
     cache-sized tiles (``oaraim.batching``). ``input_flags`` also returns ``invalid_input_flags``
     (the host's range checks, computed where the kernel reads its inputs anyway)."""
@@ -221,27 +216,21 @@ def _protection_levels(g, constellation, var_int, var_acc, b_nom, p_sat, p_const
                                     valid)
 
     def kernel(*xs):
-        return _protection_levels_flat(*xs, budget, max_order, all_in_view_weighting,
-                                       iterations, input_flags, fault_modes,
-                                       position_optimization, order_flags)
+        return _protection_levels_flat(*xs, budget, options, input_flags, order_flags)
 
     return map_tiles(kernel, arrays, batch)
 
 
-_STATIC = ("budget", "max_order", "all_in_view_weighting", "iterations", "input_flags",
-           "fault_modes", "position_optimization", "order_flags")
+_STATIC = ("budget", "options", "input_flags", "order_flags")
 _protection_levels_jit = jit_kernel(_protection_levels, static_argnames=_STATIC)
 
 
-def _protection_levels_part(start, *args, size, budget, max_order, all_in_view_weighting="int",
-                            iterations=PL_ITERATIONS, input_flags=False,
-                            fault_modes=DEFAULT_RULE, position_optimization=None,
+def _protection_levels_part(start, *args, size, budget, options, input_flags=False,
                             order_flags=False):
     """``_protection_levels`` on rows [start, start + size) of flat arrays, sliced inside the
     program (``oaraim.batching.map_threads``'s ``part_fn``)."""
-    return _protection_levels(*slice_rows(args, start, size), budget, max_order,
-                              all_in_view_weighting, iterations, input_flags, fault_modes,
-                              position_optimization, order_flags)
+    return _protection_levels(*slice_rows(args, start, size), budget, options, input_flags,
+                              order_flags)
 
 
 _protection_levels_part_jit = jit_kernel(_protection_levels_part,
@@ -255,26 +244,24 @@ def kernel_cache_size():
     return _protection_levels_jit.jitted._cache_size()
 
 
-def _kernel(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
-            position_optimization, iterations):
-    return _protection_levels(sources.g, sources.constellation, sources.var_int_m2,
-                              sources.var_acc_m2, sources.b_nom_m, sources.p_sat, p_const,
-                              sources.valid, budget, max_order, all_in_view_weighting,
-                              iterations, fault_modes=fault_modes,
-                              position_optimization=position_optimization)
+def _kernel(sources, p_const, budget, options):
+    return _protection_levels(*sources[:6], p_const, sources.valid, budget, options)
 
 
-_kernel_jit = jit_kernel(_kernel, static_argnames=(
-    "budget", "max_order", "all_in_view_weighting", "fault_modes", "position_optimization",
-    "iterations"))
+_kernel_jit = jit_kernel(_kernel, static_argnames=("budget", "options"))
+
+
+def kernel_options(budget: IntegrityBudget, options: MHSSOptions) -> MHSSOptions:
+    """The static arguments of a kernel checked before any tracing (ValueError naming the
+    field): the budget an ``IntegrityBudget``, the options in canonical form with an int
+    ``max_order`` (``MHSSOptions.checked``)."""
+    options = as_options(options)
+    check_options(budget, options.all_in_view_weighting)
+    return options.checked(need_order=True)
 
 
 def protection_levels_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
-                             budget: IntegrityBudget, *, max_order: int,
-                             all_in_view_weighting: str = "int",
-                             fault_modes: str | FaultModeRule | None = None,
-                             position_optimization: PositionOptimization | None = None,
-                             iterations: int = PL_ITERATIONS) -> MHSSResult:
+                             budget: IntegrityBudget, options: MHSSOptions) -> MHSSResult:
     """The MHSS protection levels as a pure JAX function: callable inside ``jax.jit`` and
     ``jax.vmap`` (there it runs inline in the caller's trace), and jitted on its own when
     called with concrete arrays. The same kernel ``protection_levels`` runs, without the host
@@ -285,11 +272,9 @@ def protection_levels_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batc
         b_nom, P_sat, valid), batch shape (...) and L sources.
       p_const: (..., C) P_const per constellation (clock group).
       budget: ``IntegrityBudget`` (static: hashable, part of the compiled program).
-      max_order: the template order (static int >= 1; ``required_order`` picks it from
-        concrete probabilities). Geometries needing more get status UNMONITORED_RISK.
-      all_in_view_weighting, fault_modes, position_optimization: as ``protection_levels``
-        (static).
-      iterations: the iteration bound of the bracketed PL solver (static).
+      options: ``MHSSOptions`` (static) with an int ``max_order`` (``required_order`` picks
+        it from concrete probabilities); geometries needing more get status
+        UNMONITORED_RISK.
 
     Returns:
       ``MHSSResult`` with the batch shape of ``sources``. Failures are data: a geometry with
@@ -298,19 +283,13 @@ def protection_levels_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batc
       too few sources, a singular geometry or unmonitored risk their own status. Only a
       malformed static argument raises (ValueError, before tracing the arrays).
     """
-    check_options(budget, all_in_view_weighting)
-    rule = fault_mode_rule(fault_modes)
-    max_order = check_order(rule, check_int("max_order", max_order, 1))
-    return _kernel_jit(Sources(*sources), p_const, budget=budget, max_order=max_order,
-                       all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
-                       position_optimization=check_position_optimization(
-                           position_optimization),
-                       iterations=check_int("iterations", iterations, 1))
+    return _kernel_jit(Sources(*sources).filled(), p_const, budget=budget,
+                       options=kernel_options(budget, options))
 
 
 
 def _priors_flat(g, constellation, var_int, var_acc, b_nom, valid, p_sat, p_const, budget,
-                 max_order, all_in_view_weighting, iterations, fault_modes):
+                 options):
     """One flat batch: the geometry arrays (B, ...) and the prior sets p_sat (B, P, L),
     p_const (B, P, C); returns the ``MHSSResult`` fields as (B, P, ...). The mode solutions
     once, then one loop step per prior set (``jax.lax.map``: each set is computed by the same
@@ -322,11 +301,12 @@ def _priors_flat(g, constellation, var_int, var_acc, b_nom, valid, p_sat, p_cons
                                         tl(var_acc, 1), tl(b_nom, 1), tl(valid, 1)))
     p_sat, p_const = linalg.materialize(tl(p_sat, 2)), linalg.materialize(tl(p_const, 2))
     C = p_const.shape[1]
+    fault_modes, max_order = options.fault_modes, options.max_order
     # the template's exclusions do not depend on the probabilities: those of the first set
     excluded = select_fault_modes(valid, constellation, p_sat[0], p_const[0], budget,
                                   fault_modes, max_order).excluded
-    modes = mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, excluded, C,
-                           max_order, all_in_view_weighting, True, fault_modes)
+    modes = mode_solutions(Sources(g, constellation, var_int, var_acc, b_nom, None, valid),
+                           excluded, C, options)
 
     def one(priors):
         ps, pc = priors
@@ -334,18 +314,15 @@ def _priors_flat(g, constellation, var_int, var_acc, b_nom, valid, p_sat, p_cons
                                                        b_nom, ps, valid, C))
         fm = select_fault_modes(valid, constellation, ps, pc, budget, fault_modes, max_order)
         pr = finish_projection(fm, modes, budget, flags)
-        pl, status, emt = pls_from_projection(pr, budget, iterations)
+        pl, status, emt = pls_from_projection(pr, budget, options.iterations)
         return _result(pr, pl, status, emt, pr.sigma_acc_u, jnp.zeros_like(status, bool))
 
     out = jax.lax.map(one, (p_sat, p_const))  # (P, B, ...)
     return MHSSResult(*(jnp.moveaxis(x, 0, 1) for x in out))
 
 
-@functools.partial(jit_kernel, static_argnames=("budget", "max_order",
-                                                "all_in_view_weighting", "fault_modes",
-                                                "iterations"))
-def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, fault_modes,
-                   iterations):
+@functools.partial(jit_kernel, static_argnames=("budget", "options"))
+def _priors_kernel(sources, p_const, budget, options):
     g = sources.g
     batch, (L, C) = g.shape[:-2], (g.shape[-2], p_const.shape[-1])
     n_sets = sources.p_sat.shape[0]
@@ -357,18 +334,15 @@ def _priors_kernel(sources, p_const, budget, max_order, all_in_view_weighting, f
             for x, s in ((sources.p_sat, (L,)), (p_const, (C,)))]
 
     def kernel(*xs):
-        return _priors_flat(*xs, budget, max_order, all_in_view_weighting, iterations,
-                            fault_modes)
+        return _priors_flat(*xs, budget, options)
 
     out = map_tiles(kernel, geo + sets, batch)  # (..., P, ...)
     return MHSSResult(*(jnp.moveaxis(x, len(batch), 0) for x in out))
 
 
 def protection_levels_priors_kernel(sources: Sources, p_const: Float[ArrayLike, "P *#batch C"],
-                                    budget: IntegrityBudget, *, max_order: int,
-                                    all_in_view_weighting: str = "int",
-                                    fault_modes: str | FaultModeRule | None = None,
-                                    iterations: int = PL_ITERATIONS) -> MHSSResult:
+                                    budget: IntegrityBudget,
+                                    options: MHSSOptions) -> MHSSResult:
     """``protection_levels_kernel`` under P sets of prior probabilities over the same
     geometries: ``sources.p_sat`` (P, ..., L) and ``p_const`` (P, ..., C) carry the sets on a
     leading axis, the other fields the batch shape (...). The fault-tolerant solutions
@@ -376,111 +350,83 @@ def protection_levels_priors_kernel(sources: Sources, p_const: Float[ArrayLike, 
     and are computed once per geometry; each set then gets its live modes, thresholds (eq. 12,
     N_f depends on the live modes), P_NM and PLs. For sweeps over P_s or P_const (seed 004
     Figs. 3 and 4): ~2x faster per set than one call per set (docs/benchmarks.md). Every set
-    uses the template of order ``max_order``; results equal ``protection_levels_kernel``'s
-    set by set to rounding (tested). Jit-safe, failures as data as in
-    ``protection_levels_kernel``; no ``position_optimization``.
+    uses the template of order ``options.max_order``; results equal
+    ``protection_levels_kernel``'s set by set to rounding (tested). Jit-safe, failures as data
+    as in ``protection_levels_kernel``; no ``position_optimization``.
 
     Returns:
       ``MHSSResult`` with shape (P, ...) (``pl_enu_m`` (P, ..., 3)).
     """
-    check_options(budget, all_in_view_weighting)
-    rule = fault_mode_rule(fault_modes)
-    max_order = check_order(rule, check_int("max_order", max_order, 1))
-    sources = Sources(*sources)
+    options = kernel_options(budget, options)
+    if options.position_optimization is not None:
+        raise ValueError("protection_levels_priors_kernel has no position_optimization: use "
+                         "MHSSOptions(position_optimization=None)")
+    sources = Sources(*sources).filled()
     if jnp.ndim(sources.p_sat) != jnp.ndim(sources.g) or jnp.ndim(p_const) < 2:
         raise ValueError("protection_levels_priors_kernel takes the prior sets on a leading "
                          "axis: p_sat (P, ..., L) with g (..., L, 3), and p_const (P, ..., C)")
-    return _priors_kernel(sources, p_const, budget=budget, max_order=max_order,
-                          all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
-                          iterations=check_int("iterations", iterations, 1))
+    return _priors_kernel(sources, p_const, budget=budget, options=options)
 
 
 
-def protection_levels(g: Real[ArrayLike, "*batch L 3"],
-                      constellation: Int[ArrayLike, "*#batch #L"],
-                      var_int_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                      var_acc_m2: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                      b_nom_m: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                      p_sat: Real[ArrayLike, "*#batch #L"] | Real[ArrayLike, ""],
-                      p_const: Real[ArrayLike, "*#batch C"],
-                      budget: IntegrityBudget,
-                      valid: Bool[ArrayLike, "*#batch #L"] | None = None, *,
-                      max_order: int | None = None, all_in_view_weighting: str = "int",
-                      threads: int | None = None, fault_modes: str | FaultModeRule | None = None,
-                      position_optimization: PositionOptimization | None = None) -> MHSSResult:
+def protection_levels(sources: Sources, p_const: Real[ArrayLike, "*#batch C"],
+                      budget: IntegrityBudget, options: MHSSOptions | None = None, *,
+                      threads: int | None = None) -> MHSSResult:
     """ARAIM / OARAIM protection levels by multiple-hypothesis solution separation.
 
     Seed 004 eqs. (8)-(16) with the corrections of DESIGN.md. Takes VARIANCES (the ADD's C_int
     and C_acc diagonals, m^2), unlike ``slope_hpl`` which takes standard deviations.
 
     Args:
-      g: geometry rows (..., L, 3), ``geometry.geometry_rows`` (ENU line-of-sight convention).
-      constellation: (..., L) integer clock-group labels 0..C-1 (GPS 0, Galileo 1, SOP
-        constellations after them).
-      var_int_m2, var_acc_m2: C_int and C_acc diagonals (..., L), see ``araim.error_models``.
-      b_nom_m: nominal bias bound per source (..., L).
-      p_sat: P_s per source (..., L); p_const: P_const per constellation (..., C).
+      sources: ``Sources``: the geometry rows g (..., L, 3) (``geometry.geometry_rows``, ENU
+        line-of-sight convention), the integer clock-group labels 0..C-1 (GPS 0, Galileo 1,
+        SOP constellations after them), the C_int and C_acc diagonals (``araim.error_models``),
+        b_nom and P_s per source and ``valid`` (None: every source), each (..., L) or
+        broadcasting to it (NumPy or JAX arrays, scalars).
+      p_const: P_const per constellation (..., C).
       budget: ``IntegrityBudget`` (e.g. ``BUDGET_SEED004_TABLE_I``).
-      valid: (..., L) bool, sources used (in view, healthy, not padding).
-      max_order: the template order: most simultaneous events (event conventions, up to 2) or
-        faulty constellations (``grouped``, up to 3) a monitored mode stands for; None picks
-        the smallest the convention needs over the batch. Geometries needing more get status
-        UNMONITORED_RISK (their unmonitored priors stay in P_NM).
-      all_in_view_weighting: "int" (C_int^-1, ADD/MAAST, default) or "acc" (seed 004 after
-        eq. 5).
+      options: ``MHSSOptions`` (None: the defaults): the fault-mode convention, the template
+        order (None picks the smallest the convention needs over the batch), the all-in-view
+        weighting and the all-in-view estimator (``position_adjusted`` says where MAAST's
+        Blanch et al. (2015) estimator was kept).
       threads: host threads over which a large batch is split (default
         ``oaraim.batching.default_threads()``: ``OARAIM_THREADS`` or 2); results do not depend
         on it.
-      fault_modes: the fault-mode convention, a name or ``araim.FaultModeRule``: ``add-v4.2``
-        (default, the current ADD), ``add-v3``, ``add-v3-consolidated``, ``blanch-2012``,
-        ``grouped`` (docs/conformance.md).
-      position_optimization: None (default: the weighted least-squares all-in-view estimate)
-        or an ``araim.PositionOptimization``: where the baseline misses a target, the
-        all-in-view estimator of Blanch et al. (2015) as MAAST applies it
-        (``araim.position_opt``); ``position_adjusted`` says where it was kept.
 
     Returns:
       ``MHSSResult``; every PL is inf where status != OK, never NaN.
     """
-    if all_in_view_weighting not in ("int", "acc"):
-        raise ValueError("all_in_view_weighting must be 'int' or 'acc', "
-                         f"got {all_in_view_weighting!r}")
-    if not isinstance(budget, IntegrityBudget):
-        raise ValueError("budget must be an araim.IntegrityBudget, e.g. "
-                         "araim.BUDGET_SEED004_TABLE_I")
-    rule = fault_mode_rule(fault_modes)
-    opt = check_position_optimization(position_optimization)
-    if max_order is not None:
-        max_order = check_order(rule, check_int("max_order", max_order, 1))
+    options = as_options(options)
+    check_options(budget, options.all_in_view_weighting)
+    options = options.checked()
     if threads is not None:
         threads = check_int("threads", threads, 1)
-    if is_traced((g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid)):
-        return _protection_levels_traced(g, constellation, var_int_m2, var_acc_m2, b_nom_m,
-                                         p_sat, p_const, budget, valid, max_order,
-                                         all_in_view_weighting, rule, opt)
-    flat, batch = host_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                              p_const, valid)
+    s = Sources(*sources)
+    arrays = (s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat, p_const,
+              s.valid)
+    if is_traced(arrays):
+        return _protection_levels_traced(s, p_const, budget, options)
+    flat, batch = host_inputs(*arrays)
     n = flat[0].shape[0]
     flat = pad_rows(flat, bucket(n))
-    static = dict(budget=budget, all_in_view_weighting=all_in_view_weighting, fault_modes=rule,
-                  position_optimization=opt)
     res = None
-    if max_order is None and flat[0].shape[0] <= TILE:
+    rule = options.fault_modes
+    if options.max_order is None and flat[0].shape[0] <= TILE:
         # one dispatch for a small batch: the kernel at order 1 also says, by the test of
         # required_order, whether any geometry needs more (then the batch runs again there)
-        res, flags, more = _protection_levels_jit.jitted(*flat, max_order=1, input_flags=True,
-                                                         order_flags=True, **static)
-        max_order = 2 if bool(np.any(np.asarray(more))) else 1
-        if max_order > 1:
-            res, max_order = None, required_order(flat[7], flat[1], flat[5], flat[6], budget,
-                                                  fault_modes=rule)
-    elif max_order is None:
-        max_order = required_order(flat[7], flat[1], flat[5], flat[6], budget,
-                                   fault_modes=rule)
+        res, flags, more = _protection_levels_jit.jitted(
+            *flat, budget=budget, options=options._replace(max_order=1), input_flags=True,
+            order_flags=True)
+        options = options._replace(max_order=2 if bool(np.any(np.asarray(more))) else 1)
+        if options.max_order > 1:
+            res = None
+            options = options._replace(max_order=required_order(
+                flat[7], flat[1], flat[5], flat[6], budget, fault_modes=rule))
+    elif options.max_order is None:
+        options = options._replace(max_order=required_order(flat[7], flat[1], flat[5],
+                                                            flat[6], budget, fault_modes=rule))
     if res is None:
-        res, flags = protection_levels_threaded(flat, budget, max_order, all_in_view_weighting,
-                                                threads, input_flags=True, fault_modes=rule,
-                                                position_optimization=opt)
+        res, flags = _threaded(flat, budget, options, threads)
     if bool(np.any(np.asarray(flags))):  # name the argument, batch index and source
         x = [a[:n].reshape(batch + a.shape[1:]) for a in flat]
         check_inputs(dict(zip(INPUT_RANGES, x[2:6], strict=True)), x[6], x[1], x[7],
@@ -489,33 +435,25 @@ def protection_levels(g: Real[ArrayLike, "*batch L 3"],
     return unpad(res, batch, n)
 
 
-def _protection_levels_traced(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat,
-                              p_const, budget, valid, max_order, all_in_view_weighting, rule,
-                              opt):
+def _protection_levels_traced(sources, p_const, budget, options):
     """``protection_levels`` inside a caller's trace: the kernel inline, failures as data
     (INVALID_INPUT), no host checks; ``max_order`` must be given unless the probabilities are
     concrete."""
-    args = prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const,
-                          valid, check_sources=False)
-    if max_order is None:
-        max_order = required_order(args[7], args[1], args[5], args[6], budget,
-                                   fault_modes=rule)
-    res, _ = protection_levels_threaded(args, budget, max_order, all_in_view_weighting,
-                                        input_flags=True, fault_modes=rule,
-                                        position_optimization=opt)
+    s, p_const = prepare_inputs(sources, p_const, check_sources=False)
+    if options.max_order is None:
+        options = options._replace(max_order=required_order(
+            s.valid, s.constellation, s.p_sat, p_const, budget,
+            fault_modes=options.fault_modes))
+    res, _ = _threaded([*s[:6], p_const, s.valid], budget, options)
     return res
 
 
-def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="int",
-                               threads=None, input_flags=False, fault_modes=DEFAULT_RULE,
-                               position_optimization=None):
-    """The jitted kernel on ``prepare_inputs`` output, large batches split over host threads
-    (``oaraim.batching.map_threads``: bit-identical to one call, ~1.9x faster on 2 cores).
-    ``input_flags``: returns (MHSSResult, ``invalid_input_flags``)."""
-    static = dict(budget=budget, max_order=max_order,
-                  all_in_view_weighting=all_in_view_weighting, input_flags=input_flags,
-                  fault_modes=fault_mode_rule(fault_modes),
-                  position_optimization=check_position_optimization(position_optimization))
+def _threaded(args, budget, options, threads=None):
+    """(MHSSResult, ``invalid_input_flags``) of the jitted kernel on flat arrays ``args``
+    (g, labels, var_int, var_acc, b_nom, p_sat, p_const, valid), large batches split over
+    host threads (``oaraim.batching.map_threads``: bit-identical to one call, ~1.9x faster on
+    2 cores); ``options`` checked, with an int order."""
+    static = dict(budget=budget, options=options, input_flags=True)
 
     def fn(*xs):
         return _protection_levels_jit(*xs, **static)
@@ -524,3 +462,15 @@ def protection_levels_threaded(args, budget, max_order, all_in_view_weighting="i
         return _protection_levels_part_jit(start, *xs, size=size, **static)
 
     return map_threads(fn, args, args[0].shape[:-2], threads, part_fn=part_fn)
+
+
+def protection_levels_threaded(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
+                               budget: IntegrityBudget, options: MHSSOptions, *,
+                               threads: int | None = None) -> MHSSResult:
+    """The host wrapper's jitted kernel on sources already broadcast and checked
+    (``prepare_inputs``), large batches split over host threads (bit-identical to one call,
+    ~1.9x faster on 2 cores); ``options`` with an int ``max_order``. No host checks: an
+    unusable input gives status INVALID_INPUT."""
+    options = kernel_options(budget, options)
+    s = Sources(*sources).filled()
+    return _threaded([*s[:6], p_const, s.valid], budget, options, threads)[0]

@@ -35,8 +35,73 @@ class Sources(NamedTuple):
     """(..., L) nominal bias bound b_nom (m, >= 0)."""
     p_sat: jax.Array
     """(..., L) prior probability P_s of a fault of each source, in [0, 1)."""
-    valid: jax.Array
-    """(..., L) bool: the sources used (in view, healthy, not padding)."""
+    valid: jax.Array | None = None
+    """(..., L) bool: the sources used (in view, healthy, not padding); None: every source
+    (``filled`` makes the array)."""
+
+    def filled(self) -> "Sources":
+        """These sources with ``valid`` an array (all True where it was None)."""
+        if self.valid is not None:
+            return self
+        return self._replace(valid=jnp.ones(jnp.shape(self.g)[:-1], bool))
+
+    def broadcast(self) -> "Sources":
+        """Every field broadcast to the batch shape of ``g`` ((..., L, 3) and (..., L)), as
+        JAX arrays of the kernels' dtypes (float64, int32 labels, bool ``valid``)."""
+        s = self.filled()
+        g = jnp.asarray(s.g, jnp.float64)
+        shape = g.shape[:-1]
+        return Sources(g, jnp.broadcast_to(jnp.asarray(s.constellation, jnp.int32), shape),
+                       *(jnp.broadcast_to(jnp.asarray(x, jnp.float64), shape) for x in (
+                           s.var_int_m2, s.var_acc_m2, s.b_nom_m, s.p_sat)),
+                       jnp.broadcast_to(jnp.asarray(s.valid, bool), shape))
+
+    def concat(self, *others: "Sources") -> "Sources":
+        """These sources followed by ``others`` along the source axis (e.g. GPS, then the SOP
+        towers), each broadcast to its own rows' batch shape first; the batch shapes must
+        broadcast together. Labels are kept as given (number SOP constellations after the
+        GNSS ones before joining)."""
+        parts = [s.broadcast() for s in (self, *others)]
+        batch = jnp.broadcast_shapes(*(p.g.shape[:-2] for p in parts))
+        out = []
+        for field in range(len(Sources._fields)):
+            xs = [p[field] for p in parts]
+            xs = [jnp.broadcast_to(x, batch + x.shape[-2:] if field == 0 else batch
+                                   + x.shape[-1:]) for x in xs]
+            out.append(jnp.concatenate(xs, axis=-2 if field == 0 else -1))
+        return Sources(*out)
+
+    def pad(self, n_sources: int) -> "Sources":
+        """These sources padded to ``n_sources`` along the source axis with invalid sources
+        (a unit row, unit variances, zero bias and prior, label 0, ``valid`` False): a fixed L,
+        so that batches of different sizes share a compiled kernel; padding never changes a
+        result. ValueError if there are more sources than ``n_sources``."""
+        s = self.broadcast()
+        L = s.g.shape[-2]
+        if L > n_sources:
+            raise ValueError(f"cannot pad {L} sources to n_sources={n_sources}: pass at least "
+                             f"{L}")
+        extra = n_sources - L
+        batch = s.g.shape[:-2]
+
+        def tail(x, fill):
+            pad = jnp.full(batch + (extra,) + x.shape[len(batch) + 1:], fill, x.dtype)
+            return jnp.concatenate([x, pad], axis=len(batch))
+
+        return Sources(tail(s.g, 0.0).at[..., L:, 2].set(-1.0),
+                       tail(s.constellation, 0), tail(s.var_int_m2, 1.0),
+                       tail(s.var_acc_m2, 1.0), tail(s.b_nom_m, 0.0), tail(s.p_sat, 0.0),
+                       tail(s.valid, False))
+
+    def select(self, constellations) -> "Sources":
+        """These sources with only those of the given constellation labels (ints) valid: the
+        others are marked invalid (a constellation with no valid source loses its clock
+        column and its P_const event), the source axis unchanged."""
+        s = self.broadcast()
+        keep = jnp.zeros(s.valid.shape, bool)
+        for c in constellations:
+            keep = keep | (s.constellation == int(c))
+        return s._replace(valid=s.valid & keep)
 
 
 def _unit_rows(g, axis):
@@ -60,16 +125,18 @@ def invalid_input_flags(g, constellation, var_int, var_acc, b_nom, p_sat, valid,
     return linalg.max_axis(valid & ~ok, 0)
 
 
-def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid,
-                   check_sources=True):
-    """Broadcast the arguments to the batch shape of ``g`` and check them on the host
-    (``check_sources=False``: p_const only; the caller checks the per-source arrays, as
-    ``protection_levels`` does with the kernel's ``invalid_input_flags``).
+def prepare_inputs(sources: Sources, p_const, *, check_sources=True
+                   ) -> tuple[Sources, jax.Array]:
+    """The sources broadcast to the batch shape of ``sources.g`` (JAX arrays, ``valid``
+    filled) and p_const to (..., C), checked on the host (``check_sources=False``: p_const
+    only; the caller checks the per-source arrays, as ``protection_levels`` does with the
+    kernel's ``invalid_input_flags``): (Sources, p_const).
 
     Raises ValueError naming the argument when a valid source has a non-positive or non-finite
     variance, a negative bias, a probability outside [0, 1), or a constellation label outside
     0..C-1 with C = p_const.shape[-1].
     """
+    g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, valid = Sources(*sources)
     g = jnp.asarray(g, jnp.float64)
     if g.ndim < 2 or g.shape[-1] != 3:
         raise ValueError(f"g must have shape (..., L, 3) (geometry rows), got {g.shape}")
@@ -78,7 +145,7 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
     if p_const.ndim == 0:
         raise ValueError("p_const must have a last axis of one entry per constellation (..., C)")
     C = p_const.shape[-1]
-    p_const = jnp.broadcast_to(p_const, shape[:-1] + (C,))
+    p_const = jnp.broadcast_to(p_const, _const_shape(p_const, shape[:-1]))
     valid = jnp.ones(shape, bool) if valid is None else jnp.broadcast_to(
         jnp.asarray(valid, bool), shape)
     constellation = jnp.broadcast_to(jnp.asarray(constellation, jnp.int32), shape)
@@ -89,8 +156,8 @@ def prepare_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_c
         check_inputs(arrays, p_const, constellation, valid, C, check_sources, g)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         pass  # traced: the caller validates outside jit
-    return (g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"], arrays["b_nom_m"],
-            arrays["p_sat"], p_const, valid)
+    return Sources(g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"],
+                   arrays["b_nom_m"], arrays["p_sat"], valid), p_const
 
 
 #: what a valid source's value must satisfy: (lowest, whether the lowest is allowed, upper
@@ -163,6 +230,22 @@ def check_inputs(arrays, p_const, constellation, valid, C, check_sources=True, g
         check_unit_rows(g, valid)
 
 
+def _const_shape(p_const, batch):
+    """The shape p_const (..., C) takes for sources of batch shape ``batch``, or a ValueError
+    naming both shapes."""
+    try:
+        np.broadcast_shapes(p_const.shape[:-1], batch)
+    except ValueError:
+        raise ValueError(f"p_const of shape {p_const.shape} does not broadcast to the sources' "
+                         f"batch shape {batch}: give it (..., C) with the sources' batch axes "
+                         "(or none)") from None
+    if len(p_const.shape) - 1 > len(batch) or np.broadcast_shapes(p_const.shape[:-1],
+                                                                   batch) != batch:
+        raise ValueError(f"p_const of shape {p_const.shape} has batch axes beyond the sources' "
+                         f"{batch}: give it (..., C) with the sources' batch axes (or none)")
+    return batch + p_const.shape[-1:]
+
+
 def host_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_const, valid):
     """The receiver's arguments as flat NumPy arrays, broadcast to the batch shape of ``g``:
     ([g (n, L, 3), constellation (n, L) int32, var_int, var_acc, b_nom, p_sat (n, L),
@@ -179,7 +262,7 @@ def host_inputs(g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, p_cons
     if p_const.ndim == 0:
         raise ValueError("p_const must have a last axis of one entry per constellation (..., C)")
     C = p_const.shape[-1]
-    p_const = np.broadcast_to(p_const, batch + (C,))
+    p_const = np.broadcast_to(p_const, _const_shape(p_const, batch))
     check_inputs({}, p_const, None, None, C, check_sources=False)
     valid = np.ones(shape, bool) if valid is None else np.broadcast_to(
         np.asarray(valid, bool), shape)

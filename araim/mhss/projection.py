@@ -33,12 +33,10 @@ from scipy import special
 
 from oaraim.araim import linalg
 from oaraim.araim.fault_modes import (
-    DEFAULT_RULE,
-    FaultModeRule,
     select_fault_modes,
     template_source,
 )
-from oaraim.araim.mhss.inputs import invalid_input_flags
+from oaraim.araim.mhss.inputs import Sources, invalid_input_flags
 from oaraim.araim.mhss.tangent import mode_centering, separation_tangents, wls_tangents
 from oaraim.araim.position_opt import adjusted_rows
 from oaraim.araim.status import Status
@@ -85,6 +83,9 @@ class Projection(NamedTuple):
     rows: "ModeRows | None" = None
     """The pieces ``s_pos`` is built from, where it is not built (``project(lazy_rows=True)``:
     ``s_pos`` is None then); ``position_rows`` builds it."""
+    invalid_input: jax.Array | None = None
+    """(B,) bool: a valid source has an unusable input (``invalid_input_flags``; the status
+    is INVALID_INPUT there)."""
 
 
 class ModeRows(NamedTuple):
@@ -388,32 +389,30 @@ def _int_weighted_modes_jvp(fault_modes, max_order, single_downdates, primals, t
     return out, (ds, d_var, d_bias, d_ss, np.zeros(nonsingular.shape, jax.dtypes.float0))
 
 
-def project(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid, budget,
-             max_order, all_in_view_weighting, single_downdates=True, input_flags=False,
-             fault_modes: FaultModeRule = DEFAULT_RULE, lazy_rows=False):
-    """Batch-last: g (L, 3, B); constellation, var_*, b_nom, p_sat, valid (L, B); p_const
-    (C, B). ``single_downdates`` computes the L single-source modes by rank-one downdates of
-    the all-in-view factor (C_int weighting only); otherwise every mode by its own Cholesky.
-    ``input_flags``: returns (Projection, ``invalid_input_flags``) instead. ``fault_modes``: the
-    convention (``araim.FaultModeRule``). ``lazy_rows``: a Projection whose S^(i) its reader
-    builds (``position_rows``) where the downdates allow (``mode_solutions``)."""
+def project(sources: Sources, p_const, budget, options, *, single_downdates=True,
+            lazy_rows=False) -> Projection:
+    """Batch-last: ``sources`` a ``Sources`` of g (L, 3, B) and constellation, var_*, b_nom,
+    p_sat, valid (L, B); p_const (C, B); ``options`` a checked ``MHSSOptions`` (its
+    ``max_order`` an int, ``fault_modes`` a ``FaultModeRule``). ``single_downdates`` computes
+    the L single-source modes by rank-one downdates of the all-in-view factor (C_int weighting
+    only); otherwise every mode by its own Cholesky. ``lazy_rows``: a Projection whose S^(i)
+    its reader builds (``position_rows``) where the downdates allow (``mode_solutions``).
+    ``Projection.invalid_input`` holds ``invalid_input_flags``."""
     C = p_const.shape[0]
     # the inputs arrive transposed (batch-first to batch-last): store them once, or every
     # fused consumer reads them with a stride
     g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid = (
-        linalg.materialize(x) for x in (g, constellation, var_int, var_acc, b_nom, p_sat,
-                                        p_const, valid))
+        linalg.materialize(x) for x in (*sources[:6], p_const, sources.valid))
     # from the stored batch-last inputs (cheaper than from the caller's batch-first arrays);
     # always: a flagged geometry's status is INVALID_INPUT (the host raises where it can)
     flags = linalg.materialize(invalid_input_flags(g, constellation, var_int, var_acc, b_nom, p_sat,
                                             valid, C))
-    fm = select_fault_modes(valid, constellation, p_sat, p_const, budget, fault_modes,
-                            max_order)
-    modes = mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, fm.excluded, C,
-                           max_order, all_in_view_weighting, single_downdates, fault_modes,
-                           lazy_rows)
-    pr = finish_projection(fm, modes, budget, flags)
-    return (pr, flags) if input_flags else pr
+    fm = select_fault_modes(valid, constellation, p_sat, p_const, budget, options.fault_modes,
+                            options.max_order)
+    modes = mode_solutions(Sources(g, constellation, var_int, var_acc, b_nom, p_sat, valid),
+                           fm.excluded, C, options, single_downdates=single_downdates,
+                           lazy_rows=lazy_rows)
+    return finish_projection(fm, modes, budget, flags)
 
 
 class ModeSolutions(NamedTuple):
@@ -442,14 +441,18 @@ class ModeSolutions(NamedTuple):
     """``s_pos``'s pieces where ``mode_solutions(lazy_rows=True)`` kept them."""
 
 
-def mode_solutions(g, var_int, var_acc, b_nom, valid, constellation, excluded, C, max_order,
-                   all_in_view_weighting, single_downdates=True,
-                   fault_modes: FaultModeRule = DEFAULT_RULE, lazy_rows=False) -> ModeSolutions:
+def mode_solutions(sources: Sources, excluded, n_constellations, options, *,
+                   single_downdates=True, lazy_rows=False) -> ModeSolutions:
     """The per-mode solutions of ``project`` (eqs. 8-11) for the candidate modes' exclusions
-    ``excluded`` (T, L, B) of ``select_fault_modes``; stored batch-last inputs (``project``).
+    ``excluded`` (T, L, B) of ``select_fault_modes``; stored batch-last inputs (``project``:
+    ``sources``, whose ``p_sat`` is not read), C = ``n_constellations`` clock slots, the
+    checked ``MHSSOptions`` (``max_order``, ``all_in_view_weighting``, ``fault_modes``).
     ``lazy_rows`` (C_int weighting, single downdates): also the pieces of S^(i) (``ModeRows``)
     for a ``Projection`` that leaves S^(i) to its reader; these solutions are then computed
     without ``int_weighted_modes``' derivative rule (autodiff would go through the steps)."""
+    g, constellation, var_int, var_acc, b_nom, _, valid = sources
+    C, max_order, fault_modes = n_constellations, options.max_order, options.fault_modes
+    all_in_view_weighting = options.all_in_view_weighting
     g = jnp.where(valid[:, None, :], g, 0.0)  # (not stored: docs/benchmarks.md)
     w_int = linalg.materialize(linalg.inverse_variance_weights(
         jnp.sqrt(jnp.where(valid, var_int, 1.0)), valid))
@@ -579,6 +582,6 @@ def _finish(fm, s_pos, var_pos, bias, sigma_ss, nonsingular, valid, member, var_
         s_pos, rows = None, rows._replace(usable=usable)
     return Projection(s_pos, sigma, bias, sigma_ss, threshold, monitored.at[0].set(False),
                       prior, excluded, n_modes, p_nm, fm.order, status.astype(jnp.int8),
-                      sigma_acc_u, rows)
+                      sigma_acc_u, rows, invalid_input)
 
 

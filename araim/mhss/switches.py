@@ -28,16 +28,11 @@ from jaxtyping import Array, Float, Int8
 
 from oaraim.araim import linalg
 from oaraim.araim.budget import IntegrityBudget
-from oaraim.araim.fault_modes import (
-    FaultModeRule,
-    check_order,
-    fault_mode_rule,
-    select_fault_modes,
-)
-from oaraim.araim.mhss.entry import batch_last_inputs
-from oaraim.araim.mhss.inputs import Sources, broadcast_batch, check_options
+from oaraim.araim.fault_modes import select_fault_modes
+from oaraim.araim.mhss.entry import batch_last_inputs, kernel_options
+from oaraim.araim.mhss.inputs import Sources, broadcast_batch
+from oaraim.araim.mhss.options import MHSSOptions
 from oaraim.araim.mhss.projection import project
-from oaraim.araim.validate import check_int
 from oaraim.batching import jit_kernel, map_tiles
 
 __all__ = ["SINGULAR_BAND", "SWITCH_EMT", "SWITCH_MODE_SET", "SWITCH_RTOL", "SWITCH_SINGULAR",
@@ -85,7 +80,8 @@ def _flags_flat(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid
                 max_order, all_in_view_weighting, rule, rtol, band):
     args = batch_last_inputs(g, constellation, var_int, var_acc, b_nom, p_sat, p_const, valid)
     gl, cl, vi, _, _, ps, pc, vl = args
-    pr = project(*args, budget, max_order, all_in_view_weighting, fault_modes=rule)
+    pr = project(Sources(*args[:6], args[7]), args[6], budget, MHSSOptions(
+        max_order, all_in_view_weighting, rule))
     flags = jnp.where(jnp.abs(pr.p_not_monitored - budget.p_thresh) <= rtol * budget.p_thresh,
                       SWITCH_UNMONITORED, 0)
 
@@ -130,22 +126,18 @@ _switch_flags_jit = jit_kernel(_switch_flags, static_argnames=(
 
 
 def switch_flags_kernel(sources: Sources, p_const: Float[ArrayLike, "*#batch C"],
-                        budget: IntegrityBudget, *, max_order: int,
-                        all_in_view_weighting: str = "int",
-                        fault_modes: str | FaultModeRule | None = None,
+                        budget: IntegrityBudget, options: MHSSOptions, *,
                         rtol: float = SWITCH_RTOL, band: float = SINGULAR_BAND
                         ) -> Int8[Array, "..."]:
     """(...) int8: the ``SWITCH_*`` bits (module docstring) of each geometry, 0 where its
     derivatives of ``protection_levels_kernel`` (same arguments) are those of a decision set
     that no input within ``rtol`` (relative, probabilities) or ``band`` (pivot test) changes.
-    jit- and vmap-safe; ``rtol`` and ``band`` are static floats. Costs about one more
-    projection (the PL roots are not solved)."""
-    check_options(budget, all_in_view_weighting)
-    rule = fault_mode_rule(fault_modes)
-    max_order = check_order(rule, check_int("max_order", max_order, 1))
-    s = Sources(*sources)
+    jit- and vmap-safe; ``options`` (``MHSSOptions`` with an int ``max_order``), ``rtol`` and
+    ``band`` are static. Costs about one more projection (the PL roots are not solved)."""
+    options = kernel_options(budget, options)
+    s = Sources(*sources).filled()
     return _switch_flags_jit(s.g, s.constellation, s.var_int_m2, s.var_acc_m2, s.b_nom_m,
-                             s.p_sat, p_const, s.valid, budget=budget, max_order=max_order,
-                             all_in_view_weighting=all_in_view_weighting, rule=rule,
-                             rtol=float(rtol), band=float(band))
-
+                             s.p_sat, p_const, s.valid, budget=budget,
+                             max_order=options.max_order,
+                             all_in_view_weighting=options.all_in_view_weighting,
+                             rule=options.fault_modes, rtol=float(rtol), band=float(band))

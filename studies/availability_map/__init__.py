@@ -36,6 +36,7 @@ import xarray as xr
 
 from oaraim import geometry
 from oaraim.araim import (
+    MHSSOptions,
     PositionOptimization,
     Sources,
     Status,
@@ -73,10 +74,12 @@ from oaraim.studies.availability_map.plots import (
     AVAILABILITY_BANDS_PCT as AVAILABILITY_BANDS_PCT,  # re-exported
 )
 from oaraim.studies.availability_map.plots import plot_maps
+from oaraim.studies.availability_map.row import MapConfig, MapRowInputs
 from oaraim.studies.availability_map.slots import (
     GALILEO_ALMANAC,
     GPS_ALMANAC,
     SKY_TIMES,
+    OrbitWindow,
     constellation_orbits,
     in_view,
     in_view_first,
@@ -149,36 +152,26 @@ def tower_slots(towers_csv, lat_deg, lons_deg, d_min_m, d_max_m, max_sops, h_m):
 # ------------------------------------------------------------------------------------ kernel
 
 
-@functools.partial(jit_kernel, static_argnames=("n_slots", "n_sops", "bpp", "max_order",
-                                                "budget", "requirements", "fault_modes",
-                                                "airborne_model", "position_optimization"))
-def map_kernel(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
-               gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-               requirements, fault_modes="add-v4.2", airborne_model="add",
-               position_optimization=None):
+@functools.partial(jit_kernel, static_argnames=("config",))
+def map_kernel(idx, key, row: MapRowInputs, config: MapConfig):
     """``_map_tile`` over ``idx`` (B,) in tiles of ``oaraim.batching.TILE`` realizations
     (one compiled loop body): a realization's bits do not depend on how many are computed in
     one call."""
     def tile(i):
-        return _map_tile(i, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const,
-                         mask_rad, gnss, sop, towers, p_const, n_slots=n_slots, n_sops=n_sops,
-                         bpp=bpp, max_order=max_order, budget=budget,
-                         requirements=requirements, fault_modes=fault_modes,
-                         airborne_model=airborne_model,
-                         position_optimization=position_optimization)
+        return _map_tile(i, key, row, config)
 
     return map_tiles(tile, [idx], idx.shape)
 
 
-def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad,
-              gnss, sop, towers, p_const, *, n_slots, n_sops, bpp, max_order, budget,
-              requirements, fault_modes="add-v4.2", airborne_model="add",
-              position_optimization=None):
+def _map_tile(idx, key, row, config):
     """Per realization index ``idx`` (B,) of one latitude row: the user at longitude
     ``idx // T`` and epoch ``idx % T``; its sky compacted to ``n_slots`` GNSS slots, plus
     ``n_sops`` SOP slots (BPP towers drawn from ``fold_in(key, lon index)``, or the row's CSV
     towers), plus the row's LEO slots at that epoch (``towers["leo"]``: ``leo.leo_slots``),
     through the MHSS kernel and the service level's criteria."""
+    (lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mask_rad, gnss, sop, towers,
+     p_const) = row
+    n_slots, n_sops, bpp, budget, requirements, airborne_model, mhss = config
     n_t = sat_ecef.shape[0]
     n_lon = lons_rad.shape[0]
     lon_i = jnp.minimum(idx // n_t, n_lon - 1)  # indices past the row are computed, not kept
@@ -231,8 +224,7 @@ def _map_tile(idx, key, lat_rad, lons_rad, h_m, sat_ecef, sat_ok, sat_const, mas
         g = jnp.concatenate([g, geometry.geometry_rows(s["az"], s["el"])], -2)
     r = protection_levels_kernel(Sources(g, x["constellation"], x["var_int"], x["var_acc"],
                                          x["b_nom"], x["p_sat"], x["valid"]), p_const, budget,
-                                 max_order=max_order, fault_modes=fault_mode_rule(fault_modes),
-                                 position_optimization=position_optimization)
+                                 mhss)
     ok = av.available(r.hpl_m, r.vpl_m, r.emt_m, r.sigma_acc_u_m, r.status, requirements)
     return {"hpl_m": r.hpl_m, "vpl_m": r.vpl_m, "emt_m": r.emt_m,
             "sigma_acc_m": r.sigma_acc_u_m, "status": r.status.astype(jnp.int8),
@@ -268,22 +260,18 @@ class MapRow:
         ecef, ok, cons, _, t_off, _ = constellation_orbits(p["gps"], p["galileo"],
                                                            p["duration_s"], p["step_s"],
                                                            p["sky_time"], p["allow_gaps"] == "yes")
-        self.lat_rad = np.deg2rad(float(lat_deg))
-        self.h_m = float(p["height_m"])
-        self.mask_rad = float(np.deg2rad(p["mask_deg"]))
-        self.lons_rad = jnp.asarray(np.deg2rad(np.asarray(p["lon_deg"])))
-        self.sat = (jnp.asarray(ecef), jnp.asarray(ok), jnp.asarray(cons))
-        self.gnss = {k: p[k] for k in ("sigma_ura_gps_m", "sigma_ura_gal_m", "b_nom_gps_m",
-                                       "b_nom_gal_m", "p_sat_gps", "p_sat_gal")}
-        self.sop = {k: p[k] for k in ("d_min_m", "d_max_m", "h_min_m", "h_max_m",
-                                      "sigma_ura_sop_m", "p_s_sop")}
+        lat_rad = np.deg2rad(float(lat_deg))
+        lons_rad = jnp.asarray(np.deg2rad(np.asarray(p["lon_deg"])))
+        gnss = {k: p[k] for k in ("sigma_ura_gps_m", "sigma_ura_gal_m", "b_nom_gps_m",
+                                  "b_nom_gal_m", "p_sat_gps", "p_sat_gal")}
+        sop = {k: p[k] for k in ("d_min_m", "d_max_m", "h_min_m", "h_max_m",
+                                 "sigma_ura_sop_m", "p_s_sop")}
         lay = layout(p)
-        self.static = dict(n_slots=lay["n_slots"], n_sops=lay["n_sops"], bpp=lay["bpp"],
-                           max_order=lay["max_order"], budget=lay["level"].budget,
-                           requirements=lay["requirements"], fault_modes=p["fault_modes"],
-                           airborne_model=p["airborne_model"],
-                           position_optimization=lay["position_optimization"])
-        self.p_const = jnp.asarray(lay["p_const"])
+        self.config = MapConfig(lay["n_slots"], lay["n_sops"], lay["bpp"], lay["level"].budget,
+                                lay["requirements"], p["airborne_model"], MHSSOptions(
+                                    lay["max_order"], fault_modes=fault_mode_rule(
+                                        p["fault_modes"]),
+                                    position_optimization=lay["position_optimization"]))
         self.towers = None
         if p["towers"] != "none":
             az, el, valid, label, _ = tower_slots(p["towers"], float(lat_deg), p["lon_deg"],
@@ -295,24 +283,27 @@ class MapRow:
             self.towers = {**(self.towers or {}),
                            "leo": leo_option.leo_slots(p, float(lat_deg), lay["n_leo"])}
 
+        self.row = MapRowInputs(lat_rad, lons_rad, float(p["height_m"]), jnp.asarray(ecef),
+                                jnp.asarray(ok), jnp.asarray(cons),
+                                float(np.deg2rad(p["mask_deg"])), gnss, sop, self.towers,
+                                jnp.asarray(lay["p_const"]))
+
         # the GNSS-only map beside a map with SOPs (sop_difference): the same kernel with the
         # layout of the same parameters without towers, so its values are those of a run
         # without SOPs
         self.gnss_only = None
         if (lay["n_sops"] or lay["n_leo"]) and p["sop_difference"] == "yes":
             g = layout({**p, "sops_per_km2": 0.0, "towers": "none", "leo": "none"})
-            self.gnss_only = (dict(self.static, n_sops=0, bpp=True, max_order=g["max_order"]),
-                              jnp.asarray(g["p_const"]))
+            self.gnss_only = (
+                self.row._replace(towers=None, p_const=jnp.asarray(g["p_const"])),
+                self.config._replace(n_sops=0, bpp=True, mhss=self.config.mhss._replace(
+                    max_order=g["max_order"])))
 
     def __call__(self, idx, key):
         idx = jnp.asarray(idx)
-        out = map_kernel(idx, key, self.lat_rad, self.lons_rad, self.h_m, *self.sat,
-                         self.mask_rad, self.gnss, self.sop, self.towers, self.p_const,
-                         **self.static)
+        out = map_kernel(idx, key, self.row, self.config)
         if self.gnss_only is not None:
-            static, p_const = self.gnss_only
-            g = map_kernel(idx, key, self.lat_rad, self.lons_rad, self.h_m, *self.sat,
-                           self.mask_rad, self.gnss, self.sop, None, p_const, **static)
+            g = map_kernel(idx, key, *self.gnss_only)
             out = {**out, **{f"{k}_gnss": g[k] for k in GNSS_ONLY_OUTPUTS}}
         return out
 
@@ -331,9 +322,9 @@ def _layout(key):
     req = av.Requirements(*(
         base[i] if p[k] == "preset" else (np.inf if p[k] == "none" else float(p[k]))
         for i, k in enumerate(("val_m", "hal_m", "emt_m", "sigma_acc_m"))))
-    n_slots = max_visible(p["gps"], p["galileo"], p["duration_s"], p["step_s"], p["mask_deg"],
-                          p["lat_deg"], p["lon_deg"], p["height_m"], p["sky_time"],
-                          p["allow_gaps"] == "yes")
+    n_slots = max_visible(OrbitWindow(p["gps"], p["galileo"], p["duration_s"], p["step_s"],
+                                      p["sky_time"], p["allow_gaps"] == "yes"),
+                          p["mask_deg"], p["lat_deg"], p["lon_deg"], p["height_m"])
     n_slots = max(n_slots, 1)
     if p["towers"] != "none":
         n_carriers = len(read_towers(p["towers"])[4])

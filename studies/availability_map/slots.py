@@ -6,6 +6,7 @@ and a stable argsort give (tested)."""
 
 import functools
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -153,9 +154,26 @@ def _mask_bounds(e, n, u, usable, tan_lo, tan_hi):
     return usable & above(tan_hi), usable & above(tan_lo)
 
 
+class OrbitWindow(NamedTuple):
+    """Which GNSS orbits a map reads over which epochs: ``constellation_orbits``' arguments
+    (hashable: the memoized functions take it whole)."""
+
+    gps: object
+    """The GPS source (a navigation file, an almanac, ``'nominal'``, ``'none'``)."""
+    galileo: object
+    """The Galileo source."""
+    duration_s: float
+    """The span of epochs (s)."""
+    step_s: float
+    """The epoch step (s)."""
+    sky_time: str = "week"
+    """Where the epochs start (``constellation_orbits``)."""
+    allow_gaps: bool = False
+    """Keep epochs a file does not cover."""
+
+
 @functools.lru_cache(maxsize=8)
-def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky_time="week",
-                allow_gaps=False):
+def max_visible(orbits: OrbitWindow, mask_deg, lats, lons, h_m):
     """Most satellites in view at any grid point and epoch: the GNSS slots of the kernel.
 
     Exactly the count of the map kernel's ``look_angles``. Every row's upper bound first
@@ -164,7 +182,7 @@ def max_visible(gps, galileo, duration_s, step_s, mask_deg, lats, lons, h_m, sky
     (``_most_in_view``) only where a satellite lies within ``_MASK_MARGIN_RAD`` of the mask at
     the busiest epoch. Measured, the 1 x 1 deg world: 52 s op by op, 21 s compiled with an
     arctangent per satellite, 5.8 s with both bounds of every row, ~1 s with this order."""
-    ecef, ok, *_ = constellation_orbits(gps, galileo, duration_s, step_s, sky_time, allow_gaps)
+    ecef, ok, *_ = constellation_orbits(*orbits)
     lo = jnp.asarray(np.deg2rad(np.asarray(lons, float)))
     ecef, ok = jnp.asarray(ecef), jnp.asarray(ok)
     mask = float(np.deg2rad(mask_deg))

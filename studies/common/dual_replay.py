@@ -13,6 +13,8 @@ factor / 2.59 for L1/L2). sigma_URA, sigma_URE, b_nom, P_sat and P_const per con
 an ``araim.Ism`` each (defaults ``araim.ISM_GPS``, ``araim.ISM_GALILEO``).
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from oaraim import araim, errors, geometry
@@ -91,16 +93,36 @@ def user_sigma_m(el_rad, noise_factor, model="add"):
     return noise_factor * l1
 
 
-def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM_GALILEO),
-                airborne_model="add", gps_pair="l1l5", tropo="mops", n_passes=3,
-                single=False, systems="GE"):
-    """Per-epoch inputs of ``araim.snapshot.replay`` for the dual-frequency user (module
-    docstring), in the layout of ``studies.rinex_replay.gnss_replay_inputs`` plus
-    ``constellation`` (T, S) clock groups, ``p_sat``, ``b_nom_m`` (T, S), ``p_const`` (C,),
-    ``combination`` (T, S) pair codes, ``constellations`` (names) and ``sv`` (S,).
+class DualUser(NamedTuple):
+    """The receiver of ``dual_inputs``: what it assumes and how it solves."""
 
-    ``single=True``: the single-frequency GPS L1 + Galileo E1 user instead (``SINGLE_NOTE``).
-    ``systems``: the constellations used, by RINEX letter ("GE", "G" or "E")."""
+    mask_deg: float = 5.0
+    """Elevation mask (deg)."""
+    isms: tuple = (araim.ISM_GPS, araim.ISM_GALILEO)
+    """The GPS and Galileo ``araim.Ism``."""
+    airborne_model: str = "add"
+    """The user error model of the dual-frequency user (``error_models.AIRBORNE_MODELS``)."""
+    gps_pair: str = "l1l5"
+    """The GPS frequency pair (``dual_frequency.iono_free``)."""
+    tropo: str = "mops"
+    """The tropospheric correction: "mops" or none."""
+    n_passes: int = 3
+    """Solutions whose position the corrections are recomputed at."""
+    single: bool = False
+    """The single-frequency GPS L1 + Galileo E1 user instead (``SINGLE_NOTE``)."""
+    systems: str = "GE"
+    """The constellations used, by RINEX letter ("GE", "G" or "E")."""
+
+
+def dual_inputs(table, nav_path, user: DualUser | None = None):
+    """Per-epoch inputs of ``araim.snapshot.replay`` for the dual-frequency user (module
+    docstring; ``user``: its mask, ISMs, error model, frequency pair, troposphere, passes,
+    single-frequency variant and constellations), in the layout of
+    ``studies.rinex_replay.gnss_replay_inputs`` plus ``constellation`` (T, S) clock groups,
+    ``p_sat``, ``b_nom_m`` (T, S), ``p_const`` (C,), ``combination`` (T, S) pair codes,
+    ``constellations`` (names) and ``sv`` (S,). ``user`` None: ``DualUser()``."""
+    user = DualUser() if user is None else user
+    mask_deg, isms, airborne_model, gps_pair, tropo, n_passes, single, systems = user
     table = table.select(systems)
     t = table.t_gps_s
     sv = table.sv
@@ -141,7 +163,8 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
     clock_m = C_M_S * (sat.clock_s - sat.tgd_s)
     rot, _ = prm.sagnac_rotate(np.zeros((n_t, 3)), sat.ecef_tx_m)
     sol = araim.wnls(np.where(valid, pr + clock_m, 0.0), np.asarray(rot), 1.0,
-                     valid=valid, clock_index=cons, n_clocks=n_clocks)
+                     valid=valid, clock_index=cons,
+                     options=araim.WNLSOptions(n_clocks))
     x = np.asarray(sol.position_m)
     mask = np.deg2rad(mask_deg)
 
@@ -160,7 +183,7 @@ def dual_inputs(table, nav_path, *, mask_deg=5.0, isms=(araim.ISM_GPS, araim.ISM
         sol = araim.wnls(np.where(v, pr + clock_m - iono_m - tropo_m, 0.0),
                          np.asarray(rt.sat_ecef_m),
                          np.sqrt(np.where(v, var_int, 1.0)), x0_m=x, valid=v,
-                         clock_index=cons, n_clocks=n_clocks)
+                         clock_index=cons, options=araim.WNLSOptions(n_clocks))
         x = np.where(np.isfinite(np.asarray(sol.position_m)), np.asarray(sol.position_m), x)
     rt, el, tropo_m, v, var_int, var_acc, iono_m = terms(x)
     z = lambda a: np.where(valid, np.asarray(a), 0.0)  # noqa: E731

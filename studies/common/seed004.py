@@ -33,6 +33,7 @@ import functools
 import hashlib
 import threading
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -41,6 +42,7 @@ import numpy as np
 from oaraim import geometry, mc
 from oaraim.araim import (
     BUDGET_SEED004_TABLE_I,
+    MHSSOptions,
     Sources,
     fault_mode_rule,
     protection_levels_kernel,
@@ -181,31 +183,28 @@ def draw_sops(key, n_sops, d_min_m, d_max_m, h_min_m, h_max_m):
                                h_max_m)
 
 
-def gps_inputs(el, valid):
-    """Table I GPS inputs of a (..., S) sky: variances (ADD models), b_nom, P_s, labels 0."""
+def gps_sources(az, el, valid):
+    """Table I GPS sources of a (..., S) sky (``araim.Sources``): the rows, labels 0, the
+    variances of the ADD models, b_nom and P_s."""
     vi, va = gnss_variances(el, SIGMA_URA_GPS_M)
-    return dict(var_int=vi, var_acc=va, b_nom=jnp.full(el.shape, B_NOM_GPS_M),
-                p_sat=jnp.full(el.shape, P_S_GPS), constellation=jnp.zeros(el.shape, jnp.int32),
-                valid=valid)
+    return Sources(geometry.geometry_rows(az, el), jnp.zeros(el.shape, jnp.int32), vi, va,
+                   jnp.full(el.shape, B_NOM_GPS_M), jnp.full(el.shape, P_S_GPS), valid)
 
 
-def sop_inputs(shape, sigma_ura_sop_m, p_s_sop, label):
-    """SOP inputs of shape (..., N): one constellation ``label``, b_nom 0 (DESIGN.md)."""
-    vi, va = sop_variances(jnp.full(shape, sigma_ura_sop_m))
-    return dict(var_int=vi, var_acc=va, b_nom=jnp.zeros(shape), p_sat=jnp.full(shape, p_s_sop),
-                constellation=jnp.full(shape, label, jnp.int32), valid=jnp.ones(shape, bool))
+def sop_sources(az, el, sigma_ura_sop_m, p_s_sop, label, valid=None):
+    """SOP sources of a (..., N) draw (``araim.Sources``): one constellation ``label``,
+    sigma_URE^S = sigma_URA^S, b_nom 0 (DESIGN.md); every tower valid unless ``valid``."""
+    vi, va = sop_variances(jnp.full(az.shape, sigma_ura_sop_m))
+    return Sources(geometry.geometry_rows(az, el), jnp.full(az.shape, label, jnp.int32), vi, va,
+                   jnp.zeros(az.shape), jnp.full(az.shape, p_s_sop),
+                   jnp.ones(az.shape, bool) if valid is None else valid)
 
 
-def concat_inputs(a, b):
-    """Two input dicts (``gps_inputs``, ``sop_inputs``) joined along the source axis."""
-    return {k: jnp.concatenate([a[k], b[k]], -1) for k in a}
-
-
-def mhss(g, x, p_const, max_order, fault_modes=FAULT_MODES):
-    """HPL, VPL and status of a batch (B, L) through the jit-safe kernel (we are inside jit)."""
-    r = protection_levels_kernel(Sources(g, x["constellation"], x["var_int"], x["var_acc"],
-                                         x["b_nom"], x["p_sat"], x["valid"]), p_const, BUDGET,
-                                 max_order=max_order, fault_modes=fault_mode_rule(fault_modes))
+def mhss(sources, p_const, max_order, fault_modes=FAULT_MODES):
+    """HPL, VPL, status, order and mode count of a batch of ``Sources`` (B, L) through the
+    jit-safe kernel (we are inside jit)."""
+    r = protection_levels_kernel(sources, p_const, BUDGET,
+                                 MHSSOptions(max_order, fault_modes=fault_mode_rule(fault_modes)))
     return r.hpl_m, r.vpl_m, r.status, r.order, r.n_modes
 
 
@@ -232,30 +231,49 @@ def order_for(n_gps_slots, n_sops, p_s_sop, p_const_sop, fault_modes=FAULT_MODES
 TOL_M = 2e-3
 
 
-@functools.partial(jit_kernel, static_argnames=("n_sops", "max_order", "fault_modes"))
-def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_const_sop,
-               d_min_m, d_max_m, h_min_m, h_max_m, max_order, fault_modes=FAULT_MODES):
+class SopCell(NamedTuple):
+    """The traced parameters of ``sop_kernel``'s cell: the SOPs' ISM and the BPP annulus."""
+
+    sigma_ura_sop_m: object
+    """sigma_URA^S (m)."""
+    p_s_sop: jax.Array
+    """(P,) the P_s^S values computed at once."""
+    p_const_sop: object
+    """P_const^S."""
+    d_min_m: object
+    """Inner radius of the annulus (m)."""
+    d_max_m: object
+    """Outer radius (m)."""
+    h_min_m: object
+    """Lowest tower height (m)."""
+    h_max_m: object
+    """Highest tower height (m)."""
+
+
+@functools.partial(jit_kernel, static_argnames=("n_sops", "options"))
+def sop_kernel(keys, table, cell: SopCell, n_sops, options):
     """HPL/VPL of GPS + n_sops SOPs per realization key (chunk,) under each P_s^S of
-    ``p_s_sop`` (P,): outputs (P, chunk). The geometry's fault-tolerant solutions are shared
-    by the P values (``araim.protection_levels_priors_kernel``)."""
+    ``cell.p_s_sop`` (P,): outputs (P, chunk). ``table``: the day's (az, el, valid) GPS sky
+    table; ``options`` the ``araim.MHSSOptions`` (static). The geometry's fault-tolerant
+    solutions are shared by the P values (``araim.protection_levels_priors_kernel``)."""
+    t_az, t_el, t_valid = table
+
     def draw(k):
         _, az, el, v = draw_gps(k, t_az, t_el, t_valid)
-        tw = draw_sops(k, n_sops, d_min_m, d_max_m, h_min_m, h_max_m)
+        tw = draw_sops(k, n_sops, cell.d_min_m, cell.d_max_m, cell.h_min_m, cell.h_max_m)
         return az, el, v, tw.az_rad, tw.el_rad
 
     az, el, v, az_s, el_s = jax.vmap(draw)(keys)
-    x = concat_inputs(gps_inputs(el, v), sop_inputs(az_s.shape, sigma_ura_sop_m, 0.0, 1))
-    g = jnp.concatenate([geometry.geometry_rows(az, el), geometry.geometry_rows(az_s, el_s)], -2)
-    n_sets = p_s_sop.shape[0]
+    gps = gps_sources(az, el, v)
+    sources = gps.concat(sop_sources(az_s, el_s, cell.sigma_ura_sop_m, 0.0, 1))
+    n_sets = cell.p_s_sop.shape[0]
     p_sat = jnp.concatenate([
-        jnp.broadcast_to(x["p_sat"][..., :el.shape[-1]], (n_sets,) + el.shape),
-        jnp.broadcast_to(p_s_sop[:, None, None], (n_sets,) + az_s.shape)], -1)
+        jnp.broadcast_to(gps.p_sat, (n_sets,) + el.shape),
+        jnp.broadcast_to(cell.p_s_sop[:, None, None], (n_sets,) + az_s.shape)], -1)
+    p_const_sop = cell.p_const_sop
     p_const = jnp.broadcast_to(jnp.stack([jnp.full_like(p_const_sop, P_CONST_GPS),
                                           p_const_sop]), (n_sets, keys.shape[0], 2))
-    r = protection_levels_priors_kernel(
-        Sources(g, x["constellation"], x["var_int"], x["var_acc"], x["b_nom"], p_sat,
-                x["valid"]), p_const, BUDGET, max_order=max_order,
-        fault_modes=fault_mode_rule(fault_modes))
+    r = protection_levels_priors_kernel(sources._replace(p_sat=p_sat), p_const, BUDGET, options)
     return {"hpl_sop_m": r.hpl_m, "vpl_sop_m": r.vpl_m, "status_sop": r.status,
             "order_sop": r.order}
 
@@ -264,8 +282,8 @@ def sop_kernel(keys, t_az, t_el, t_valid, n_sops, sigma_ura_sop_m, p_s_sop, p_co
 def gps_kernel(keys, t_az, t_el, t_valid, fault_modes=FAULT_MODES):
     """HPL/VPL of GPS alone per realization key (chunk,): the same in every cell."""
     epoch, az, el, v = jax.vmap(lambda k: draw_gps(k, t_az, t_el, t_valid))(keys)
-    hpl, vpl, status, _, _ = mhss(geometry.geometry_rows(az, el), gps_inputs(el, v),
-                                    jnp.array([P_CONST_GPS]), 1, fault_modes)
+    hpl, vpl, status, _, _ = mhss(gps_sources(az, el, v), jnp.array([P_CONST_GPS]), 1,
+                                  fault_modes)
     return {"hpl_gps_m": hpl, "vpl_gps_m": vpl, "status_gps": status, "epoch": epoch,
             "n_gps": jnp.sum(v, -1)}
 
@@ -384,9 +402,9 @@ class Fig4Cell:
 
     def _sop_args(self, keys):
         sigma, p_const_sop, *annulus = self.args
-        return (keys, self.jtable["az_rad"], self.jtable["el_rad"], self.jtable["valid"],
-                self.n_sops, sigma, np.asarray(self.group), p_const_sop, *annulus,
-                self.max_order, self.fault_modes)
+        return (keys, (self.jtable["az_rad"], self.jtable["el_rad"], self.jtable["valid"]),
+                SopCell(sigma, np.asarray(self.group), p_const_sop, *annulus), self.n_sops,
+                MHSSOptions(self.max_order, fault_modes=fault_mode_rule(self.fault_modes)))
 
     def sop(self, keys):
         """The GPS + SOP outputs of this cell's group for ``keys``: {name: (P, chunk)}."""

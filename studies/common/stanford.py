@@ -15,6 +15,8 @@ An epoch without a position (PE not finite) is in none and is counted as ``no_po
 count the regions (``stanford_counts``) in their results; the figure reads those counts.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 #: the regions in the order they are listed, with their shading (WAAS / EGNOS style)
@@ -44,10 +46,22 @@ def stanford_counts(pe_m, pl_m, al_m):
             "no_position": int(np.sum(~pos)), "epochs": int(pe.size)}
 
 
-def draw_stanford(fig, ax, pe_m, pl_m, al_m, counts, *, error_label, pl_label, title):
+class StanfordLabels(NamedTuple):
+    """The texts of one Stanford diagram."""
+
+    error: str
+    """The x axis: the position error, e.g. "HPE (m)"."""
+    pl: str
+    """The y axis: the protection level, e.g. "HPL (m)"."""
+    title: str
+    """The panel title (the notes on PLs that could not be computed follow it)."""
+
+
+def draw_stanford(fig, ax, pe_m, pl_m, al_m, counts, labels: StanfordLabels):
     """One Stanford diagram on ``ax``: the four regions shaded and labelled with their stored
     ``counts`` (``stanford_counts``), the epochs as a 2-D histogram on log axes (``AXIS_M``,
     ``BINS_PER_DECADE``), PLs that could not be computed on the top edge."""
+    error_label, pl_label, title = labels
     from matplotlib.colors import LogNorm
     from matplotlib.ticker import LogLocator
 

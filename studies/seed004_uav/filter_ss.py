@@ -64,8 +64,9 @@ def filter_monitor(geom, meas: FlightPseudoranges, sources: araim.filter_monitor
     pr, corr, var_int, use = meas
     cons, p_sat, p_const = sources
     max_order = options.max_order
-    r = araim.snapshot.replay(pr, geom.tx_pos_m, var_int, var_int, use, geom.truth_m,
-                              correction_m=corr, constellation=cons, p_const=p_const, x0_m=x0,
+    r = araim.snapshot.replay(pr, geom.tx_pos_m, araim.snapshot.ReplaySources(
+                                  var_int, var_int, use, constellation=cons), geom.truth_m,
+                              p_const=p_const, correction_m=corr, x0_m=x0,
                               config=araim.snapshot.ReplayConfig(monitors=("slope",)))
     pos = np.asarray(r.wnls.position_m)
     ok = np.asarray(r.wnls.status) == 0

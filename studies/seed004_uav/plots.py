@@ -5,7 +5,7 @@ import json
 import numpy as np
 import xarray as xr
 
-from oaraim.studies.common.stanford import draw_stanford
+from oaraim.studies.common.stanford import StanfordLabels, draw_stanford
 
 #: Stanford-diagram configurations of Fig. 9
 STANFORD_SOPS = (0, 1, 2, 4, 8)
@@ -96,9 +96,9 @@ def plot_uav(out_dir):
     for ax, i in zip(axes.ravel(), sel, strict=False):
         lo, hi = ds["mi_ci_low"].values[i], ds["mi_ci_high"].values[i]
         draw_stanford(fig, ax, hpe[i], hpl[i], hal, counts[str(int(n_sops[i]))],
-                      error_label="HPE (m)", pl_label="HPL (m)",
-                      title=f"GPS + {n_sops[i]} SOPs, HAL {hal:g} m: MI 95 % CI "
-                            f"{100 * lo:.2g}-{100 * hi:.2g} %")
+                      StanfordLabels("HPE (m)", "HPL (m)",
+                                     f"GPS + {n_sops[i]} SOPs, HAL {hal:g} m: MI 95 % CI "
+                                     f"{100 * lo:.2g}-{100 * hi:.2g} %"))
     for ax in axes.ravel()[len(sel):]:
         ax.axis("off")
     inj = float(a.get("inject_sop_bias_m", 0.0))

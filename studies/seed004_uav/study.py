@@ -344,9 +344,9 @@ class Seed004Uav(Study):
     # ----------------------------------------------------------------- pieces
     def _config(self, geom, pr, corr, var_int, var_acc, use, cons, p_sat, b_nom, p_const, x0):
         n_t = use.shape[0]
-        r = snapshot.replay(pr, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
-                            correction_m=corr, constellation=cons, p_const=p_const, x0_m=x0,
-                            config=SLOPE_ONLY)
+        r = snapshot.replay(pr, geom.tx_pos_m, snapshot.ReplaySources(
+                                var_int, var_acc, use, constellation=cons), geom.truth_m,
+                            p_const=p_const, correction_m=corr, x0_m=x0, config=SLOPE_ONLY)
         used = np.asarray(r.used)
         g = np.asarray(r.g_enu)
         mo = int(required_order(jnp.asarray(used), jnp.asarray(np.broadcast_to(cons, used.shape)),
@@ -357,11 +357,11 @@ class Seed004Uav(Study):
         vpl = np.full(n_t, np.inf)
         for start, idx, n in _blocks(n_t, BLOCK):
             pl = araim.protection_levels(
-                g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx], var_acc[idx],
-                np.broadcast_to(b_nom, (idx.size, b_nom.size)),
-                np.broadcast_to(p_sat, (idx.size, p_sat.size)),
+                araim.Sources(g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx],
+                              var_acc[idx], np.broadcast_to(b_nom, (idx.size, b_nom.size)),
+                              np.broadcast_to(p_sat, (idx.size, p_sat.size)), used[idx]),
                 np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
-                valid=used[idx], max_order=mo, fault_modes=self.fault_modes)
+                araim.MHSSOptions(mo, fault_modes=self.fault_modes))
             hpl[start:start + n] = np.asarray(pl.hpl_m)[:n]
             vpl[start:start + n] = np.asarray(pl.vpl_m)[:n]
         ok = np.asarray(r.wnls.status) == 0
@@ -379,10 +379,12 @@ class Seed004Uav(Study):
         out["detected"] = np.zeros(n_t, bool)
         out["n_excluded"] = np.zeros(n_t, np.int16)
         for start, idx, n in _blocks(n_t, BLOCK_FDE):
-            r = snapshot.replay(pr[idx], geom.tx_pos_m[idx], var_int[idx], var_acc[idx],
-                                use[idx], geom.truth_m[idx], correction_m=corr[idx],
-                                constellation=np.broadcast_to(cons, (idx.size, cons.size)),
-                                p_const=p_const, p_sat=p_sat, b_nom_m=b_nom, x0_m=x0[idx],
+            r = snapshot.replay(pr[idx], geom.tx_pos_m[idx], snapshot.ReplaySources(
+                                    var_int[idx], var_acc[idx], use[idx],
+                                    constellation=np.broadcast_to(cons, (idx.size, cons.size)),
+                                    p_sat=p_sat, b_nom_m=b_nom),
+                                geom.truth_m[idx], p_const=p_const, correction_m=corr[idx],
+                                x0_m=x0[idx],
                                 config=snapshot.ReplayConfig(monitors=("mhss",), max_order=mo,
                                                              fault_modes=self.fault_modes))
             s = slice(start, start + n)
@@ -419,9 +421,9 @@ class Seed004Uav(Study):
         out = {"prn": prn[j], "bias_m": bias}
         for tag, extra in (("gps", []), ("sop1", list(sop1))):
             use = geom.valid & (geom.is_gps | np.isin(np.arange(pr.shape[1]), extra))[None]
-            r = snapshot.replay(prf, geom.tx_pos_m, var_int, var_acc, use, geom.truth_m,
-                                correction_m=corr, constellation=cons, p_const=p_const,
-                                x0_m=x0, config=SLOPE_ONLY)
+            r = snapshot.replay(prf, geom.tx_pos_m, snapshot.ReplaySources(
+                                    var_int, var_acc, use, constellation=cons), geom.truth_m,
+                                p_const=p_const, correction_m=corr, x0_m=x0, config=SLOPE_ONLY)
             used = np.asarray(r.used)
             mo = int(required_order(jnp.asarray(used),
                                     jnp.asarray(np.broadcast_to(cons, used.shape)),
@@ -444,11 +446,12 @@ class Seed004Uav(Study):
                 # first tau reaches 1 (the minimum detectable bias) is the min over monitored
                 # modes and axes of T / |separation per metre of bias|
                 s, s1 = [solution_separation(
-                    g[idx], np.broadcast_to(cons, (idx.size, cons.size)), var_int[idx],
-                    var_acc[idx], np.broadcast_to(b_nom, (idx.size, b_nom.size)),
-                    np.broadcast_to(p_sat, (idx.size, p_sat.size)),
+                    araim.Sources(g[idx], np.broadcast_to(cons, (idx.size, cons.size)),
+                                  var_int[idx], var_acc[idx],
+                                  np.broadcast_to(b_nom, (idx.size, b_nom.size)),
+                                  np.broadcast_to(p_sat, (idx.size, p_sat.size)), used[idx]),
                     np.broadcast_to(p_const, (idx.size, p_const.size)), BUDGET_SEED004_TABLE_I,
-                    resid[idx], valid=used[idx], max_order=mo, fault_modes=self.fault_modes)
+                    resid[idx], araim.MHSSOptions(mo, fault_modes=self.fault_modes))
                     for resid in (y, unit)]
                 per_m = np.abs(np.asarray(s1.separation_m)[:n])
                 thr_all = np.asarray(s1.threshold_m)[:n]
