@@ -1,73 +1,28 @@
-"""The LEO SOP measurement and error model: each LEO constellation an SOP constellation.
-
-Beside the GNSS model (``error_models.gnss_variances``: ADD, dual-frequency airborne user) and
-the terrestrial SOP model (``error_models.sop_variances``: seed 004 App. A, no atmosphere), a
-LEO downlink used for ranging is a satellite signal on one frequency whose operator is not a
-GNSS provider:
-
-    C_int(l, l) = sigma_URA^LEO^2 + sigma_iono^2 + sigma_tropo^2 + sigma_mp^2 + sigma_noise^2
-    C_acc(l, l) = sigma_URE^LEO^2 + (the same elevation-dependent terms)
-
-- sigma_URA^LEO, sigma_URE^LEO, b_nom, P_s^LEO, P_const^LEO: an ``Ism`` (the ISM values of
-  one constellation, ``araim.Ism``), with the presets of ``LEO_ISM``.
-- Ionosphere (``LeoSignal``): one frequency, no ionosphere-free combination; the residual after
-  a broadcast-model correction taken as GPS L1's Klobuchar residual (RTCA DO-229 J.2.3,
-  tau_vert, default the mid-latitude 4.5 m) scaled to the carrier by (f_L1 / f)^2 (the
-  first-order delay is 40.3 TEC / f^2) and mapped by the MOPS thin-shell obliquity (350 km).
-  All the TEC is taken to lie below the satellite (``iono_share`` = 1: conservative; at 550 km
-  the topside and plasmasphere above, ~20-40 % of the TEC, are not crossed).
-- Troposphere: the MOPS residual (``error_models.sigma_tropo_m``), the same atmosphere.
-- Multipath: the ADD airborne curve (``error_models.sigma_multipath_m``), a stand-in for the
-  same antenna; code noise: a constant per signal (``sigma_noise_m``, our choice: no
-  published code-noise model of these downlinks exists).
-- Clocks: one clock per constellation (a common time reference, the ``"constellation"``
-  option) or one per satellite (``"satellite"``: each satellite its own SOP constellation).
-  With one clock per satellite a snapshot receiver learns nothing of its position from the
-  LEO pseudoranges (each range only fixes its own clock, seed 004 Theorem 1) and every added
-  satellite brings fault modes (Theorem 2 raises the PLs): the option is there to say so, and
-  ``tests/test_leo_theorems.py`` checks it.
+"""LEO constellations on the receiver's side: the ISM presets (``LEO_ISM``, ``araim.Ism``
+objects of the receiver's configuration), the clock options (``LEO_CLOCKS``) and the
+constellation labels of LEO sources (``leo_labels``). The LEO error model (``LeoSignal``,
+``LEO_SIGNALS``, ``leo_variances``, ``sigma_iono_leo_m``, ``sigma_elevation_leo_m``) lives in
+``errors.leo``; this module re-exports its names for users of ``araim.leo_errors``.
 """
 
-from typing import NamedTuple
-
-import jax.numpy as jnp
 import numpy as np
 
 from oaraim.araim.epoch import Ism
-from oaraim.errors import F_L1_HZ, iono_obliquity, sigma_multipath_m, sigma_tropo_m
+from oaraim.errors import (
+    KLOBUCHAR_TAU_VERT_MID_M,
+    LEO_SIGNALS,
+    LeoSignal,
+    leo_variances,
+    sigma_elevation_leo_m,
+    sigma_iono_leo_m,
+)
 
-#: DO-229 J.2.3 vertical Klobuchar residual at GPS L1, mid geomagnetic latitudes (m)
-KLOBUCHAR_TAU_VERT_MID_M = 4.5
+__all__ = ["KLOBUCHAR_TAU_VERT_MID_M", "LEO_CLOCKS", "LEO_ISM", "LEO_SIGNALS", "LeoSignal",
+           "leo_labels", "leo_variances", "sigma_elevation_leo_m", "sigma_iono_leo_m"]
 
 #: the clock options of a LEO constellation
 LEO_CLOCKS = ("constellation", "satellite")
 
-
-class LeoSignal(NamedTuple):
-    """The ranging signal of a LEO constellation (a static configuration)."""
-
-    carrier_hz: float
-    """Downlink carrier used for ranging, Hz (sets the ionospheric delay, 1 / f^2)."""
-    sigma_noise_m: float = 1.0
-    """Code noise, metres (our choice; no published model)."""
-    tau_vert_l1_m: float = KLOBUCHAR_TAU_VERT_MID_M
-    """Vertical residual ionosphere at GPS L1 after the broadcast model (m)."""
-    iono_share: float = 1.0
-    """Share of the TEC below the satellite (1: all of it, conservative)."""
-
-
-#: the signals of the named constellations: the downlink bands of their filings, at the band's
-#: centre (Starlink and OneWeb user downlinks 10.7-12.7 GHz Ku; Iridium 1,616-1,626.5 MHz L;
-#: ORBCOMM 137-138 MHz VHF; Globalstar 2,483.5-2,500 MHz S). At VHF the ionosphere is 130
-#: times L1's: ORBCOMM pseudoranges are metre-useless without a dual-frequency or Doppler
-#: method, which is why ORBCOMM SOP navigation is Doppler positioning.
-LEO_SIGNALS = {
-    "starlink": LeoSignal(11.7e9),
-    "oneweb": LeoSignal(11.7e9),
-    "iridium": LeoSignal(1.62125e9),
-    "orbcomm": LeoSignal(137.5e6),
-    "globalstar": LeoSignal(2.49175e9),
-}
 
 #: ISM presets of a LEO constellation (sigma_URA, sigma_URE, b_nom, P_s, P_const):
 #: - ``tle``: ephemeris from public two-line element sets: SGP4 from a Starlink TLE is ~1 km
@@ -85,31 +40,6 @@ LEO_ISM = {
     "estimated": Ism(1.0, 2.0 / 3.0, 0.0, 1e-5, 1e-4),
     "degraded-20x": Ism(20.0, 40.0 / 3.0, 0.0, 1e-5, 1e-4),
 }
-
-
-def sigma_iono_leo_m(el_rad, signal: LeoSignal):
-    """Residual ionosphere of a single-frequency LEO downlink, metres: tau_vert (f_L1 / f)^2
-    x share x obliquity (module docstring)."""
-    scale = (F_L1_HZ / signal.carrier_hz) ** 2 * signal.iono_share
-    return signal.tau_vert_l1_m * scale * iono_obliquity(el_rad)
-
-
-def sigma_elevation_leo_m(el_rad, signal: LeoSignal):
-    """The elevation-dependent part of a LEO range's error, metres: the root sum of squares
-    of ionosphere, troposphere, multipath and code noise."""
-    return jnp.sqrt(sigma_iono_leo_m(el_rad, signal) ** 2 + sigma_tropo_m(el_rad) ** 2
-                    + sigma_multipath_m(el_rad) ** 2 + signal.sigma_noise_m ** 2)
-
-
-def leo_variances(el_rad, ism: Ism, signal: LeoSignal):
-    """(var_int_m2, var_acc_m2) of LEO sources at elevations ``el_rad`` (..., L), radians:
-    sigma_URA^2 (sigma_URE^2 for accuracy; None: equal to sigma_URA, as ``sop_variances``)
-    plus ``sigma_elevation_leo_m``^2. The sigmas may be traced (differentiable)."""
-    el_rad = jnp.asarray(el_rad, jnp.float64)
-    ura = jnp.asarray(ism.sigma_ura_m, jnp.float64)
-    ure = ura if ism.sigma_ure_m is None else jnp.asarray(ism.sigma_ure_m, jnp.float64)
-    common = sigma_elevation_leo_m(el_rad, signal) ** 2
-    return ura**2 + common, ure**2 + common
 
 
 def leo_labels(n, first_label, clocks="constellation"):

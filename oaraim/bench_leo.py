@@ -3,7 +3,7 @@ sources, and the NumPy oracle at the same inputs.
 
 A geometry: 16 GNSS satellites (8 GPS, 8 Galileo; random sky above 5 deg, ADD error models,
 sigma_URA 1 m, b_nom 0.75 m, P_sat 1e-5, P_const 1e-8 / 1e-4) and L - 16 LEO satellites of one
-SOP constellation (random sky above 25 deg, ``araim.leo_errors``: Starlink's Ku downlink,
+SOP constellation (random sky above 25 deg, ``errors.leo``: Starlink's Ku downlink,
 the ``estimated`` ISM: sigma_URA 1 m, P_s 1e-5, P_const 1e-4). ``add-v4.2`` (the default) up
 to its 52 sources at the order its P_thresh rule asks (2 from L = 40: the pairs' priors exceed
 P_thresh); L = 60 under ``grouped`` (seed 004's convention: no source limit).
@@ -32,7 +32,7 @@ def leo_inputs(n, L, seed=0):
     az_g, el_g = geometry.random_sky(k1, N_GNSS, np.deg2rad(5.0), (n,))
     az_l, el_l = geometry.random_sky(k2, L - N_GNSS, np.deg2rad(25.0), (n,))
     vi, va = errors.gnss_variances(el_g)
-    vl, val = araim.leo_variances(el_l, araim.LEO_ISM["estimated"], araim.LEO_SIGNALS["starlink"])
+    vl, val = errors.leo_variances(el_l, araim.LEO_ISM["estimated"], errors.LEO_SIGNALS["starlink"])
     labels = jnp.array([0] * (N_GNSS // 2) + [1] * (N_GNSS // 2) + [2] * (L - N_GNSS))
     shape = (n, L)
     return dict(

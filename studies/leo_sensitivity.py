@@ -3,7 +3,7 @@
 Seed 004's Fig. 4 question (the mean HPL change over a sigma_URA^S x P_s^S grid, per number
 of SOPs) asked of LEO constellations: GPS + Galileo (ADD error models, sigma_URA 1 m,
 b_nom 0.75 m, P_sat 1e-5, P_const 1e-8 / 1e-4, mask 5 deg) plus the n LEO satellites of highest
-elevation above ``leo_mask_deg`` of one constellation (``araim.leo_errors``: its downlink's
+elevation above ``leo_mask_deg`` of one constellation (``errors.leo``: its downlink's
 ionosphere, MOPS troposphere, airborne multipath, code noise; one clock; P_const^LEO), under
 the LPV-200 budget and seed 004's fault-mode convention (``grouped``, as Fig. 4: P_s up to
 0.1 assigned to monitored modes). ``fault_modes=add-v4.2`` is an option, but a costly one:
@@ -108,7 +108,7 @@ def _sources(d, n, sigma, log10_p_s, p_const_leo, signal):
     k = d["az_l"].shape[-1]
     use = d["valid_l"] & (jnp.arange(k) < n)
     ism = araim.Ism(sigma, 2.0 / 3.0 * sigma, 0.0, 0.0, 0.0)
-    vi_l, va_l = araim.leo_variances(jnp.where(use, d["el_l"], jnp.pi / 2), ism, signal)
+    vi_l, va_l = errors.leo_variances(jnp.where(use, d["el_l"], jnp.pi / 2), ism, signal)
     p_s = 10.0 ** log10_p_s
     cat = lambda a, b: jnp.concatenate([a, b], -1)  # noqa: E731
     g = jnp.concatenate([geometry.geometry_rows(d["az"], d["el"]),
@@ -288,7 +288,7 @@ class LeoSensitivity(ResumableStudy):
         pcl = jnp.float64(params["p_const_leo"])
         for i, name in enumerate(cs):
             d = {k: jnp.asarray(v) for k, v in draws(params, realizations, seed, name).items()}
-            signal = araim.LEO_SIGNALS[name]
+            signal = errors.LEO_SIGNALS[name]
             vpl0, hpl0 = gnss_only(d, pcl, signal=signal, fault_modes=params["fault_modes"])
             ng = d["az"].shape[-1]
             for j, n in enumerate(ns):

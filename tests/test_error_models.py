@@ -120,6 +120,10 @@ def test_the_earlier_homes_re_export_the_one_home():
     assert geometry.ImuSpec is em.ImuSpec and geometry.vn100 is em.vn100
     assert sim.ErrorModel is em.ErrorModel and sim.GnssErrorModel is em.GnssErrorModel
     assert geometry.SISError is em.SISError and geometry.sis_error.summary is em.sis.summary
+    for name in ("LEO_SIGNALS", "LeoSignal", "leo_variances", "sigma_iono_leo_m",
+                 "sigma_elevation_leo_m", "KLOBUCHAR_TAU_VERT_MID_M"):
+        assert getattr(araim.leo_errors, name) is getattr(em, name), name
+    assert araim.leo_variances is em.leo_variances and araim.LEO_SIGNALS is em.LEO_SIGNALS
     el = np.deg2rad(ELS_DEG)
     np.testing.assert_array_equal(araim.error_models.gnss_variances(el)[0],
                                   em.gnss_variances(el)[0])

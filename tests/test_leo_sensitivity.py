@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from oaraim import araim
+from oaraim import errors
 from oaraim.registry import STUDIES
 from oaraim.studies import leo_sensitivity as ls
 
@@ -46,7 +46,7 @@ def test_boundary_lies_where_the_grid_changes_sign(small):
 def test_exact_derivative_matches_finite_differences(small):
     p, _ = small
     d = {k: jnp.asarray(v) for k, v in ls.draws(p, 32, 0, "starlink").items()}
-    sig = araim.LEO_SIGNALS["starlink"]
+    sig = errors.LEO_SIGNALS["starlink"]
     pc = jnp.float64(1e-4)
     v0, h0 = ls.gnss_only(d, pc, signal=sig, fault_modes="grouped")
     keep = d["n_in_view"] >= 4

@@ -1,4 +1,4 @@
-"""LEO satellites as SOP constellations in the MHSS (araim.leo_errors with geometry.leo):
+"""LEO satellites as SOP constellations in the MHSS (errors.leo with geometry.leo):
 
 - seed 004 Theorem 2 for one LEO satellite in its own new constellation: the PLs are raised
   (new >= old - 2 x the solver tolerance, DESIGN.md), on real Walker-shell skies;
@@ -18,7 +18,7 @@ import pytest
 
 from oaraim import araim, geometry
 from oaraim import reference_mhss as ref
-from oaraim.araim import leo_errors as le
+from oaraim.errors import leo as le
 from oaraim.geometry import leo
 from oaraim.readers import gpstime
 
@@ -47,7 +47,7 @@ def _skies(n_users=24, seed=3, leo_mask_deg=25.0):
     return out
 
 
-def _inputs(g, s, n_leo, ism=le.LEO_ISM["estimated"], clocks="constellation", signal=None):
+def _inputs(g, s, n_leo, ism=araim.LEO_ISM["estimated"], clocks="constellation", signal=None):
     """Compact arrays (L,) of one epoch: the GNSS in view, then the n_leo LEO of highest
     elevation (labels from 2)."""
     signal = signal or le.LEO_SIGNALS["starlink"]
@@ -60,7 +60,7 @@ def _inputs(g, s, n_leo, ism=le.LEO_ISM["estimated"], clocks="constellation", si
     az_l, el_l = np.asarray(s.az_rad)[0][order], np.asarray(s.el_rad)[0][order]
     vi, va = (np.asarray(x) for x in araim.error_models.gnss_variances(el, 1.0))
     vil, val = (np.asarray(x) for x in le.leo_variances(el_l, ism, signal))
-    lab = le.leo_labels(order.size, 2, clocks)
+    lab = araim.leo_labels(order.size, 2, clocks)
     n_groups = 0 if not order.size else int(lab.max()) - 1
     x = {"g": np.asarray(geometry.geometry_rows(np.r_[az, az_l], np.r_[el, el_l])),
          "const": np.r_[code, lab].astype(np.int32), "vi": np.r_[vi, vil], "va": np.r_[va, val],
@@ -94,12 +94,12 @@ def test_iono_scales_with_inverse_square_frequency():
     vhf = float(le.sigma_iono_leo_m(np.pi / 2, le.LEO_SIGNALS["orbcomm"]))
     assert ku == pytest.approx(4.5 * (1575.42 / 11700.0) ** 2, rel=1e-12)
     assert vhf == pytest.approx(590.74, abs=0.01)
-    vi, va = le.leo_variances(np.deg2rad(90.0), le.LEO_ISM["estimated"],
+    vi, va = le.leo_variances(np.deg2rad(90.0), araim.LEO_ISM["estimated"],
                               le.LEO_SIGNALS["starlink"])
     common = float(le.sigma_elevation_leo_m(np.pi / 2, le.LEO_SIGNALS["starlink"])) ** 2
     assert float(vi) == pytest.approx(1.0 + common) and float(va) == pytest.approx(4 / 9 + common)
     with pytest.raises(ValueError, match="clocks must be one of"):
-        le.leo_labels(3, 2, "per-sat")
+        araim.leo_labels(3, 2, "per-sat")
 
 
 @pytest.mark.parametrize("i", range(8))

@@ -32,7 +32,7 @@ The earlier homes keep their names as re-exports of this one: ``araim.error_mode
 ``sim.ErrorModel``, ``sim.GnssErrorModel``.
 """
 
-from oaraim.errors import atmosphere, gnss, imu, sis, sop, world
+from oaraim.errors import atmosphere, gnss, imu, leo, sis, sop, world
 from oaraim.errors.atmosphere import (
     iono_obliquity,
     klobuchar_delay_m,
@@ -53,15 +53,24 @@ from oaraim.errors.gnss import (
     sigma_user_ed259a_m,
 )
 from oaraim.errors.imu import ImuSpec, vn100
+from oaraim.errors.leo import (
+    KLOBUCHAR_TAU_VERT_MID_M,
+    LEO_SIGNALS,
+    LeoSignal,
+    leo_variances,
+    sigma_elevation_leo_m,
+    sigma_iono_leo_m,
+)
 from oaraim.errors.sis import SISError, sis_errors
 from oaraim.errors.sop import sop_variances
 from oaraim.errors.world import LTE_URBAN_POSITION_RMSE_M, ErrorModel, GnssErrorModel
 
 __all__ = [
-    "AIRBORNE_MODELS", "F_L1_HZ", "F_L5_HZ", "LTE_URBAN_POSITION_RMSE_M", "URE_OVER_URA",
-    "ErrorModel", "GnssErrorModel", "ImuSpec", "SISError", "atmosphere", "gnss",
-    "gnss_variances", "imu", "iono_free_factor", "iono_obliquity", "klobuchar_delay_m", "sis",
-    "sis_errors", "sigma_iono_klobuchar_m", "sigma_multipath_m", "sigma_noise_m",
-    "sigma_tropo_m", "sigma_user_airborne_m", "sigma_user_ed259a_m", "sop", "sop_variances",
-    "tropo_delay_m", "vn100", "world",
+    "AIRBORNE_MODELS", "F_L1_HZ", "F_L5_HZ", "KLOBUCHAR_TAU_VERT_MID_M", "LEO_SIGNALS",
+    "LTE_URBAN_POSITION_RMSE_M", "URE_OVER_URA", "ErrorModel", "GnssErrorModel", "ImuSpec",
+    "LeoSignal", "SISError", "atmosphere", "gnss", "gnss_variances", "imu", "iono_free_factor",
+    "iono_obliquity", "klobuchar_delay_m", "leo", "leo_variances", "sis", "sis_errors",
+    "sigma_elevation_leo_m", "sigma_iono_klobuchar_m", "sigma_iono_leo_m", "sigma_multipath_m",
+    "sigma_noise_m", "sigma_tropo_m", "sigma_user_airborne_m", "sigma_user_ed259a_m", "sop",
+    "sop_variances", "tropo_delay_m", "vn100", "world",
 ]

@@ -3,7 +3,7 @@ FILE``): a LEO constellation as one SOP constellation beside GPS and Galileo.
 
 The LEO sky of a latitude row is computed once, on the host side of the kernel, as slots:
 per (longitude, epoch) the ``leo_max`` satellites in view (elevation >= ``leo_mask_deg``) of
-highest elevation, their azimuth, elevation and error variances (``araim.leo_errors``). The
+highest elevation, their azimuth, elevation and error variances (``errors.leo``). The
 map kernel gathers a realization's slots as it gathers CSV towers, so a shell of 1,584
 satellites costs the kernel ``leo_max`` sources, not 1,584.
 
@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from oaraim import araim, geometry
+from oaraim import araim, errors, geometry
 
 #: the LEO choices besides a TLE file path
 LEO_CHOICES = ("none", *geometry.LEO_PRESETS)
@@ -85,10 +85,10 @@ def leo_ism(p):
 
 
 def leo_signal(p):
-    """The ``araim.LeoSignal`` of the run: the named constellation's downlink (a TLE file:
+    """The ``errors.LeoSignal`` of the run: the named constellation's downlink (a TLE file:
     ``leo_signal``'s preset)."""
-    name = p["leo"] if p["leo"] in araim.LEO_SIGNALS else p["leo_signal"]
-    return araim.LEO_SIGNALS[name]
+    name = p["leo"] if p["leo"] in errors.LEO_SIGNALS else p["leo_signal"]
+    return errors.LEO_SIGNALS[name]
 
 
 def leo_slots(p, lat_deg, n_leo):
@@ -100,7 +100,7 @@ def leo_slots(p, lat_deg, n_leo):
                                   jnp.asarray(ecef), jnp.asarray(ok),
                                   float(np.deg2rad(p["leo_mask_deg"])), k=n_leo)
     ism, sig = leo_ism(p), leo_signal(p)
-    vi, va = araim.leo_variances(jnp.where(valid, el, jnp.pi / 2), ism, sig)
+    vi, va = errors.leo_variances(jnp.where(valid, el, jnp.pi / 2), ism, sig)
     label = araim.leo_labels(n_leo, 2, p["leo_clocks"])
     return {"az": az, "el": el, "valid": valid, "var_int": vi, "var_acc": va,
             "p_sat": jnp.full(az.shape, ism.p_sat),
@@ -157,7 +157,7 @@ def _params():
         "leo_clocks": Param("constellation", parse_choice(*araim.LEO_CLOCKS), "one LEO clock "
                             "per constellation, or one per satellite (then LEO ranges cannot "
                             "help a snapshot user: seed 004 Theorem 1)"),
-        "leo_signal": Param("starlink", parse_choice(*araim.LEO_SIGNALS), "downlink error "
+        "leo_signal": Param("starlink", parse_choice(*errors.LEO_SIGNALS), "downlink error "
                             "model of a TLE file's satellites (a preset's own otherwise)"),
     }
 
