@@ -60,7 +60,14 @@ from jax.typing import ArrayLike
 from jaxtyping import Bool, Float, Int
 
 from oaraim.araim import linalg
-from oaraim.araim.event_sets import event_tails, pad_row, per_set, stored_sum
+from oaraim.araim.event_sets import (
+    event_tails,
+    merge_equal_sets,
+    pad_row,
+    per_set,
+    stored_sum,
+    suffix_sums,
+)
 
 
 class ModeTemplate(NamedTuple):
@@ -584,11 +591,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
                     rows.append(linalg.materialize(r))
                 suffix = jnp.stack(rows)
             else:  # E == T: every set is a slot
-                suffix = jnp.broadcast_to(tail, ni.shape)
-                for j in range(T):  # slots: sources out, then enumeration order
-                    nj = n_out[j][None]
-                    after = (nj > ni) | ((nj == ni) & jnp.asarray(idx[:T] <= j)[:, None])
-                    suffix = suffix + jnp.where(after, other[j][None], 0.0)
+                suffix = suffix_sums(tail, ni, n_out, other, idx[:T])
             sel = forced[:T] | (cand[:T] & (suffix > budget.p_thresh))
             if full and E > T:
                 # the first unforced set beyond the slots in the walk's order: the walk
@@ -646,12 +649,7 @@ def event_modes_batch_last(valid, constellation, p_sat, p_const, budget, rule: F
             code = code + jnp.where(named & ~inside, jnp.asarray(two[np.minimum(s, L - 1)],
                                                                  dtype)[:, None], 0.0)
         code = linalg.materialize(code)
-        dup = jnp.zeros(sel.shape, bool)
-        merged = jnp.zeros(pr.shape, dtype)
-        for j in range(T):
-            same = (code[j][None] == code) & sel[j][None] & sel
-            dup = dup | (same & jnp.asarray(np.arange(T) > j)[:, None])
-            merged = merged + jnp.where(same, pr[j][None], 0.0)
+        dup, merged = merge_equal_sets(code, sel, pr)
         live = sel & ~dup
     prior_out = jnp.where(live, merged, 0.0)
     excl_c = jnp.asarray((np.arange(C)[None] == k0[:, None]) | (np.arange(C)[None] == k1[:, None])
