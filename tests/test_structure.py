@@ -135,15 +135,14 @@ def test_the_face_rule_finds_every_way_past_a_face(structure, tmp_path):
     assert "`araim.h` (export h in araim/__init__.py" in found[2]
 
 
-def test_the_widest_public_signature_does_not_grow(rep, structure):
-    """A ratchet until the receiver core takes its inputs and options as objects: no public
-    function or method wider than the widest when the check came (``MAX_PARAMETERS``); the
-    target, ``TARGET_PARAMETERS`` = 8, is reported beside it (docs/design.md)."""
+def test_public_signatures_take_at_most_eight_parameters(rep, structure):
+    """Inputs and options travel as objects: no public function or method takes more than
+    ``MAX_PARAMETERS`` = ``TARGET_PARAMETERS`` = 8 parameters (docs/design.md)."""
     assert rep["over_max_parameters"] == [], (
         "take the inputs or options as one object instead of adding parameters")
     n, name = rep["widest_signature"]
-    assert n <= structure.MAX_PARAMETERS and name
-    assert rep["signatures_over_target"] >= 0 and structure.TARGET_PARAMETERS == 8
+    assert n <= structure.MAX_PARAMETERS == structure.TARGET_PARAMETERS == 8 and name
+    assert rep["signatures_over_target"] == 0
 
 
 def test_no_tracker_references_in_code_and_docs(rep):
