@@ -377,7 +377,7 @@ def bench(
         "(minutes; the accelerator's row where JAX has one)")] = False,
     only: Annotated[str | None, typer.Option(
         help="run only these comma-separated parts: startup, latency, slope, mhss, fig3, sky, "
-        "ekf, map, risk (--fig4, --world-map and --dask-map add theirs)")] = None,
+        "ekf, filterbank, map, risk, leo (--fig4, --world-map and --dask-map add theirs)")] = None,
     mhss_batch: Annotated[int | None, typer.Option(
         help="batch of the MHSS throughput rows (default 65,536, 16,384 with --quick; an "
         "accelerator wants ~10^6)")] = None,
