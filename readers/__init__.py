@@ -4,8 +4,9 @@ RINEX 2/3 observation files (``read_observations``, ``read_observation_table``),
 navigation files (``read_navigation``: the broadcast records; ``navigation_extras``: the
 Klobuchar coefficients and T_GD; ``read_beidou_records``), YUMA/SEM almanacs
 (``read_yuma_records``, ``read_sem_records``), SP3 precise orbits (``read_sp3``), RINEX clock
-files (``read_clock_rinex``) and recorded drives and flights (``load_recording``,
-``write_recording``; the format: ``readers.recording``). Every malformed file is an error (a
+files (``read_clock_rinex``), tower CSVs (``read_towers_csv``: the SOP transmitters of the
+availability maps) and recorded drives and flights (``load_recording``, ``write_recording``;
+the format: ``readers.recording``). Every malformed file is an error (a
 ``ValueError``) naming the file, the line and how to fix it. GPS time (``gpstime``) is the time
 scale the readers read every epoch into.
 
@@ -53,18 +54,20 @@ from oaraim.readers.rinex_obs import (
     read_observations,
 )
 from oaraim.readers.sp3 import PreciseOrbits, SP3Error, read_sp3
+from oaraim.readers.towers import TOWER_COLUMNS, TowerFileError, TowerRecords, read_towers_csv
 from oaraim.readers.transmitters import MIN_SEPARATION_M, first_near_pair
 
 __all__ = [
     "DEFAULT_MAX_AGE_S", "GALILEO", "GALILEO_SOURCES", "GEO_PRNS", "GPS", "MIN_SEPARATION_M",
-    "ORBIT_LIMITS", "RECORD_FIELDS", "SYSTEM_CODES", "SYSTEM_NAMES", "AlmanacFileError",
-    "AlmanacRecords", "BeidouRecords", "ClockFileError", "NavigationExtras",
+    "ORBIT_LIMITS", "RECORD_FIELDS", "SYSTEM_CODES", "SYSTEM_NAMES", "TOWER_COLUMNS",
+    "AlmanacFileError", "AlmanacRecords", "BeidouRecords", "ClockFileError", "NavigationExtras",
     "NavigationFileError", "NavigationRecords", "ObservationFileError", "ObservationFileWarning",
     "ObservationTable", "Observations", "PreciseClocks", "PreciseOrbits", "SP3Error",
-    "check_navigation_file", "check_observation_file", "first_near_pair", "galileo_nav",
-    "gpstime", "implausible_orbit", "navigation_extras", "orbit_limits", "read_beidou_records",
-    "read_clock_rinex", "read_navigation", "read_observation_table", "read_observations",
-    "read_sem_records", "read_sp3", "read_yuma_records", "rinex_clk", "rinex_obs", "tgd_at",
+    "TowerFileError", "TowerRecords", "check_navigation_file", "check_observation_file",
+    "first_near_pair", "galileo_nav", "gpstime", "implausible_orbit", "navigation_extras",
+    "orbit_limits", "read_beidou_records", "read_clock_rinex", "read_navigation",
+    "read_observation_table", "read_observations", "read_sem_records", "read_sp3",
+    "read_towers_csv", "read_yuma_records", "rinex_clk", "rinex_obs", "tgd_at",
 ]
 
 # The recordings' reader and writer need pandas (~0.5 s to import): ``recording`` and its

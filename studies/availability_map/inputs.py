@@ -2,15 +2,12 @@
 axes, orbit files, limits, the tower CSV and coastlines (GeoJSON). Errors name the parameter
 or the file and line, and say what is expected."""
 
-import csv
-import io
-import re
 from pathlib import Path
 
 import numpy as np
 
 from oaraim.geometry import geodetic_to_ecef
-from oaraim.readers import MIN_SEPARATION_M, first_near_pair
+from oaraim.readers import MIN_SEPARATION_M, TowerFileError, first_near_pair, read_towers_csv
 from oaraim.studies.base import in_range, keyword_or_file, positive
 
 # ------------------------------------------------------------------------------------ grids
@@ -93,80 +90,28 @@ def parse_towers(name, v):
     return str(p.resolve())
 
 
-class TowerFileError(ValueError):
-    """A tower CSV that cannot be used: names the file and the line."""
-
-
 def read_towers(path):
     """Towers of a CSV (lat_deg, lon_deg, height_m, carrier): arrays and the carrier names
-    (sorted; carrier k becomes SOP constellation 2 + k). UTF-8, a byte-order mark accepted
-    (Excel's "CSV UTF-8"); bytes that are not UTF-8, broken quoting, a short or long row, a
-    non-number, a value out of range, a row given twice (two rows of one carrier closer than
-    ``readers.MIN_SEPARATION_M``, 1 m) or a last line without its line break (a
-    file cut short) is a ``TowerFileError`` (a ValueError) naming the file and line."""
-    need = ("lat_deg", "lon_deg", "height_m", "carrier")
-    raw = Path(path).read_bytes()
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = raw[:e.start].count(b"\n") + 1
-        raise TowerFileError(f"tower file {path}, line {line}: not UTF-8 text (byte {e.start}); "
-                             "save it as CSV with the columns " + ", ".join(need)) from None
-    control = re.search(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]", text)
-    if control:
-        line = text.count("\n", 0, control.start()) + 1
-        raise TowerFileError(f"tower file {path}, line {line}: control character "
-                             f"{control.group()!r}: not a text CSV")
-    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
-    try:
-        header = next(reader, None)
-        body = [(reader.line_num, row) for row in reader]
-    except csv.Error as e:
-        raise TowerFileError(f"tower file {path}, line {reader.line_num}: not CSV ({e})") from None
-    header = [h.strip() for h in header] if header else []
-    if not body or any(c not in header for c in need):
-        raise TowerFileError(f"tower file {path}, line 1: needs a header with the columns "
-                             f"{', '.join(need)} and at least one row; got "
-                             f"{header if header else 'an empty file'}")
-    if not text.endswith(("\n", "\r")):
-        raise TowerFileError(f"tower file {path}, line {text.count(chr(10)) + 1}: the last line "
-                             "does not end with a line break: the file is truncated")
-    col = {c: header.index(c) for c in need}
-    lat, lon, h, car, line_of = [], [], [], [], []
-    for i, row in body:
-        if not any(x.strip() for x in row):
-            continue  # a blank line
-        if len(row) != len(header):
-            raise TowerFileError(f"tower file {path}, line {i}: {len(row)} fields where the "
-                                 f"header has {len(header)} ({', '.join(header)})")
-        r = {c: row[col[c]].strip() for c in need}
-        try:
-            la, lo, hh = float(r["lat_deg"]), float(r["lon_deg"]), float(r["height_m"])
-        except ValueError:
-            raise TowerFileError(f"tower file {path}, line {i}: lat_deg, lon_deg and height_m "
-                                 f"must be numbers, got {r}") from None
-        if not (-90 <= la <= 90 and -180 <= lo <= 360 and -500 <= hh <= 9000):
-            raise TowerFileError(f"tower file {path}, line {i}: lat_deg in [-90, 90], lon_deg "
-                                 f"in [-180, 360], height_m in [-500, 9000] m; got {r}")
-        if not r["carrier"]:
-            raise TowerFileError(f"tower file {path}, line {i}: empty carrier")
-        lat.append(la)
-        lon.append(lo)
-        h.append(hh)
-        car.append(r["carrier"])
-        line_of.append(i)
-    xyz = np.asarray(geodetic_to_ecef(np.radians(lat), np.radians(lon), np.asarray(h, float)))
+    (sorted; carrier k becomes SOP constellation 2 + k). The file is read and checked by
+    ``readers.read_towers_csv`` (its format and errors); here, where the towers are placed in
+    ECEF (``geometry.geodetic_to_ecef``), a row given twice (two rows of one carrier closer
+    than ``readers.MIN_SEPARATION_M``, 1 m) is a ``TowerFileError`` (a ValueError) naming the
+    file and line. Returns ``(lat_deg, lon_deg, height_m, carrier_index, names)``."""
+    rec = read_towers_csv(path)
+    car = rec.carrier.tolist()
+    xyz = np.asarray(geodetic_to_ecef(np.radians(rec.lat_deg), np.radians(rec.lon_deg),
+                                      rec.height_m))
     near = first_near_pair(xyz, car)
     if near is not None:
         a, b, d = near
         again = "again" if d < 1e-6 else f"again ({d:.3g} m from it)"  # 1e-6: rounding
-        raise TowerFileError(f"tower file {path}, line {line_of[b]}: the tower of line "
-                             f"{line_of[a]} {again}: two rows of carrier {car[b]!r} closer "
+        raise TowerFileError(f"tower file {path}, line {rec.line[b]}: the tower of line "
+                             f"{rec.line[a]} {again}: two rows of carrier {car[b]!r} closer "
                              f"than {MIN_SEPARATION_M:g} m are one transmitter given twice (it "
                              "would count as two independent ranges); one row per transmitter "
                              "(carriers sharing a mast: one row each)")
     names = sorted(set(car))
-    return (np.array(lat), np.array(lon), np.array(h),
+    return (rec.lat_deg, rec.lon_deg, rec.height_m,
             np.array([names.index(c) for c in car]), names)
 
 
