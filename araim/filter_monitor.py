@@ -37,6 +37,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Array, Bool, Float, Real
 from scipy import special
 
 from oaraim.araim import ekf as _ekf
@@ -44,6 +46,7 @@ from oaraim.araim.budget import IntegrityBudget
 from oaraim.araim.fault_modes import (
     DEFAULT_RULE,
     FaultModeRule,
+    FaultModes,
     check_order,
     event_template,
     fault_mode_rule,
@@ -163,7 +166,8 @@ def _epoch_modes(valid, constellation, p_sat, p_const, budget, rule, max_order):
                               p_const[:, None], budget, rule, max_order)
 
 
-def separation_monitor(x_pos, p_pos, fm, budget: IntegrityBudget,
+def separation_monitor(x_pos: Float[ArrayLike, "K 3"], p_pos: Float[ArrayLike, "K 3 3"],
+                       fm: FaultModes, budget: IntegrityBudget,
                        iterations: int = PL_ITERATIONS) -> FilterMonitorEpoch:
     """The monitor of one epoch from the bank's position estimates ``x_pos`` (K, 3), their
     covariances ``p_pos`` (K, 3, 3) (ENU, m, m^2; filter 0 the main one) and the epoch's fault
@@ -296,8 +300,12 @@ def _bank_setup(shape, sources: BankSources, options: BankOptions):
     return rule, max_order, jnp.asarray(sources.constellation), p_sat, p_const, K
 
 
-def run_linear_monitor(x0, p0, model: LinearModel, z, valid, sources: BankSources,
-                       options: BankOptions):
+def run_linear_monitor(x0: Real[ArrayLike, " n"], p0: Real[ArrayLike, "n n"],
+                       model: LinearModel, z: Real[ArrayLike, "E L"],
+                       valid: Bool[ArrayLike, "E L"], sources: BankSources,
+                       options: BankOptions
+                       ) -> tuple[tuple[Float[Array, "K n"], Float[Array, "K n n"]],
+                                  FilterMonitorEpoch]:
     """The filter bank on a linear model over E epochs (one ``lax.scan``).
 
     ``x0`` (n,), ``p0`` (n, n): the common prior of every filter; ``z``, ``valid`` (E, L);
@@ -400,8 +408,10 @@ def ekf_bank_step(states: _ekf.EkfState, inputs: _ekf.EkfInputs, used, tx_pos, p
     return jax.vmap(one)(states, used)
 
 
-def run_ekf_monitor(state0: _ekf.EkfState, inputs: _ekf.EkfInputs, tx_pos,
-                    params: _ekf.EkfParams, sources: BankSources, options: BankOptions):
+def run_ekf_monitor(state0: _ekf.EkfState, inputs: _ekf.EkfInputs,
+                    tx_pos: Float[ArrayLike, "L 3"], params: _ekf.EkfParams,
+                    sources: BankSources, options: BankOptions
+                    ) -> tuple[_ekf.EkfState, FilterMonitorEpoch]:
     """The filter bank on the seed 000 EKF over E epochs (one ``lax.scan``); ``inputs``
     (``araim.ekf.EkfInputs`` stacked over E epochs: ``gyro``, ``accel`` (E, n, 3); ``z``,
     ``valid``, ``tx_clk_m`` (E, L); ``sigma_m`` scalar, (L,) or (E, L)), ``tx_pos`` (L, 3), the

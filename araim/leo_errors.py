@@ -6,6 +6,7 @@ constellation labels of LEO sources (``leo_labels``). The LEO error model (``Leo
 """
 
 import numpy as np
+from jaxtyping import Int32
 
 from oaraim.araim.epoch import Ism
 from oaraim.errors import (
@@ -42,7 +43,8 @@ LEO_ISM = {
 }
 
 
-def leo_labels(n, first_label, clocks="constellation"):
+def leo_labels(n: int, first_label: int, clocks: str = "constellation"
+               ) -> Int32[np.ndarray, " n"]:
     """Constellation labels (n,) of n LEO sources: all ``first_label`` (one clock) or
     ``first_label + 0..n-1`` (one clock per satellite)."""
     if clocks not in LEO_CLOCKS:

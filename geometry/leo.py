@@ -31,6 +31,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
+from jaxtyping import Int, Real
 
 from oaraim.constants import (
     GPS_UTC_LEAP_SECONDS,
@@ -39,6 +41,8 @@ from oaraim.constants import (
     WGS84_GM_M3_S2,
     WGS84_J2,
 )
+from oaraim.geometry.almanac_orbits import Almanac
+from oaraim.geometry.broadcast_orbits import Ephemeris
 from oaraim.geometry.sky import Sky, look_angles
 from oaraim.readers import gpstime
 
@@ -308,7 +312,14 @@ def _brouwer_mean_motion(sat):
     return sat.no_kozai / (1.0 + d1 / adel**2)
 
 
-def walker_tle_text(shell: WalkerShell, epoch_t_gps_s, every=1):
+#: what ``leo_sky`` takes as its constellation: ``leo_constellation``'s argument (a preset name,
+#: a ``WalkerShell``, a TLE file path) or an orbits object with ``sat_position_ecef``
+_LeoSource = (str | Path | WalkerShell | WalkerConstellation | TleConstellation | Almanac
+              | Ephemeris)
+
+
+def walker_tle_text(shell: WalkerShell, epoch_t_gps_s: float, every: int = 1
+                    ) -> tuple[str, Int[np.ndarray, " S"]]:
     """(text of a three-line TLE file, satellite indices (S',)): every ``every``-th satellite
     of ``shell`` as SGP4 mean elements at ``epoch_t_gps_s`` (GPS seconds) that reproduce our
     Walker orbit: e = 0, the inclination, the inertial node (node longitude + GMST), mean
@@ -340,7 +351,8 @@ def walker_tle_text(shell: WalkerShell, epoch_t_gps_s, every=1):
     return "\n".join(lines) + "\n", idx
 
 
-def leo_constellation(spec, epoch_t_gps_s=None, j2=True):
+def leo_constellation(spec: str | Path | WalkerShell, epoch_t_gps_s: float | None = None,
+                      j2: bool = True) -> WalkerConstellation | TleConstellation:
     """The orbits object of ``spec``: a preset name (``LEO_PRESETS``), a ``WalkerShell``, or
     a TLE file path. Walker shells are placed at ``epoch_t_gps_s`` (default: the GPS origin);
     a TLE file carries its own epochs."""
@@ -354,7 +366,9 @@ def leo_constellation(spec, epoch_t_gps_s=None, j2=True):
                      f"{', '.join(LEO_PRESETS)} or the path of a TLE file")
 
 
-def leo_sky(receiver_ecef_m, t_gps_s, leo, mask_deg=10.0, code=2) -> Sky:
+def leo_sky(receiver_ecef_m: Real[ArrayLike, "*rx 3"],
+            t_gps_s: Real[ArrayLike, " T"] | Real[ArrayLike, ""], leo: _LeoSource,
+            mask_deg: float = 10.0, code: int = 2) -> Sky:
     """The ``Sky`` of a LEO constellation (``leo_constellation``'s argument, or an orbits
     object) from receivers ``(..., 3)`` (ECEF m) at GPS times (T,): ``(..., T, S)`` look
     angles, valid above ``mask_deg``; every satellite carries constellation code ``code``

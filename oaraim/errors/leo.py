@@ -29,9 +29,11 @@ GNSS provider:
   ``tests/test_leo_theorems.py`` checks it.
 """
 
-from typing import NamedTuple
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import jax.numpy as jnp
+from jax.typing import ArrayLike
+from jaxtyping import Array, Float, Real
 
 from oaraim.errors.atmosphere import iono_obliquity
 from oaraim.errors.gnss import F_L1_HZ, sigma_multipath_m, sigma_tropo_m
@@ -79,7 +81,17 @@ def sigma_elevation_leo_m(el_rad, signal: LeoSignal):
                     + sigma_multipath_m(el_rad) ** 2 + signal.sigma_noise_m ** 2)
 
 
-def leo_variances(el_rad, ism, signal: LeoSignal):
+@runtime_checkable
+class _IsmSigmas(Protocol):
+    """What ``leo_variances`` reads of an ISM: an ``araim.Ism`` (the receiver's configuration,
+    a layer above the error models) or anything with its two sigmas (floats or traced)."""
+
+    sigma_ura_m: float
+    sigma_ure_m: float | None
+
+
+def leo_variances(el_rad: Real[ArrayLike, "..."], ism: _IsmSigmas, signal: LeoSignal
+                  ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
     """(var_int_m2, var_acc_m2) of LEO sources at elevations ``el_rad`` (..., L), radians, for
     the ISM values ``ism`` (an ``araim.Ism``: ``sigma_ura_m``, ``sigma_ure_m``): sigma_URA^2
     (sigma_URE^2 for accuracy; None: equal to sigma_URA, as ``sop_variances``) plus
