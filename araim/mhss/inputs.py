@@ -136,28 +136,22 @@ def prepare_inputs(sources: Sources, p_const, *, check_sources=True
     variance, a negative bias, a probability outside [0, 1), or a constellation label outside
     0..C-1 with C = p_const.shape[-1].
     """
-    g, constellation, var_int_m2, var_acc_m2, b_nom_m, p_sat, valid = Sources(*sources)
-    g = jnp.asarray(g, jnp.float64)
+    sources = Sources(*sources)
+    g = jnp.asarray(sources.g, jnp.float64)
     if g.ndim < 2 or g.shape[-1] != 3:
         raise ValueError(f"g must have shape (..., L, 3) (geometry rows), got {g.shape}")
-    shape = g.shape[:-1]
     p_const = jnp.asarray(p_const, jnp.float64)
     if p_const.ndim == 0:
         raise ValueError("p_const must have a last axis of one entry per constellation (..., C)")
     C = p_const.shape[-1]
-    p_const = jnp.broadcast_to(p_const, _const_shape(p_const, shape[:-1]))
-    valid = jnp.ones(shape, bool) if valid is None else jnp.broadcast_to(
-        jnp.asarray(valid, bool), shape)
-    constellation = jnp.broadcast_to(jnp.asarray(constellation, jnp.int32), shape)
-    arrays = {name: jnp.broadcast_to(jnp.asarray(x, jnp.float64), shape) for name, x in (
-        ("var_int_m2", var_int_m2), ("var_acc_m2", var_acc_m2), ("b_nom_m", b_nom_m),
-        ("p_sat", p_sat))}
+    p_const = jnp.broadcast_to(p_const, _const_shape(p_const, g.shape[:-2]))
+    s = sources._replace(g=g).broadcast()
+    arrays = {name: getattr(s, name) for name in INPUT_RANGES}
     try:
-        check_inputs(arrays, p_const, constellation, valid, C, check_sources, g)
+        check_inputs(arrays, p_const, s.constellation, s.valid, C, check_sources, s.g)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         pass  # traced: the caller validates outside jit
-    return Sources(g, constellation, arrays["var_int_m2"], arrays["var_acc_m2"],
-                   arrays["b_nom_m"], arrays["p_sat"], valid), p_const
+    return s, p_const
 
 
 #: what a valid source's value must satisfy: (lowest, whether the lowest is allowed, upper
