@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from oaraim.readers import gpstime, rinex_nav3
+from oaraim.readers import gpstime, rinex_nav3, rinex_text
 from oaraim.readers.orbit_limits import ORBIT_LIMITS, implausible_orbit
 
 #: constellation codes of ``geometry.sky`` (DESIGN.md: GPS 0, Galileo 1)
@@ -156,12 +156,7 @@ def _check_navigation_text(path: Path, text: str) -> dict:
     if not lines:
         raise NavigationFileError(f"{path}: line 1: the file is empty")
     head = lines[0]
-    try:
-        version = float(head[:9])
-    except ValueError:
-        raise NavigationFileError(
-            f"{path}: line 1: not a RINEX header (expected 'RINEX VERSION / TYPE' with the "
-            f"version in columns 1-9, got {head[:40]!r})") from None
+    version = rinex_text.header_version(path, head, NavigationFileError)
     file_type = head[20:21]
     if head[60:80].rstrip() != "RINEX VERSION / TYPE" or file_type not in ("N", "n"):
         raise NavigationFileError(

@@ -166,12 +166,7 @@ def _parse_header(path: Path, lines: list[str]) -> dict:
     if not lines or (len(lines) == 1 and not lines[0].strip()):
         raise ObservationFileError(f"{path}: line 1: the file is empty")
     head = lines[0]
-    try:
-        version = float(head[:9])
-    except ValueError:
-        raise ObservationFileError(
-            f"{path}: line 1: not a RINEX header (expected 'RINEX VERSION / TYPE' with the "
-            f"version in columns 1-9, got {head[:40]!r})") from None
+    version = rinex_text.header_version(path, head, ObservationFileError)
     if "RINEX VERSION / TYPE" not in head or head[20:21] not in ("O", "o"):
         raise ObservationFileError(
             f"{path}: line 1: not a RINEX observation file (type {head[20:21]!r} in column 21, "

@@ -119,3 +119,13 @@ def decoded_lines(message: str) -> str:
     """A message about a CRINEX file's decoded text: its first 'line N' becomes 'line N of the
     decompressed text'."""
     return re.sub(r": line (\d+)", lambda m: f": line {m[1]}{DECODED}", message, count=1)
+
+
+def header_version(path: Path, head: str, error) -> float:
+    """The format version in columns 1-9 of a RINEX file's first line ``head``; ``error``
+    (the exception class) of one line naming the file when it is not a number."""
+    try:
+        return float(head[:9])
+    except ValueError:
+        raise error(f"{path}: line 1: not a RINEX header (expected 'RINEX VERSION / TYPE' with "
+                    f"the version in columns 1-9, got {head[:40]!r})") from None
