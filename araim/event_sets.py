@@ -72,13 +72,32 @@ def per_set(single, first, second, op, r_enum, pair=None):
     return linalg.blocks([single] + [pair(i) for i in range(n - 1)])
 
 
+#: the most candidate sets whose ordered sums are written out step by step (unrolled into the
+#: program); more run as one ``lax.scan``. The same additions in the same order either way, so
+#: the same bits. Measured (2 cores, one thread): Blanch 2012's 78 sets (57 modes) 34-37k PL/s
+#: unrolled vs 27-28k as a scan; 40 sources under add-v4.2, order 2 (946 sets): 86 vs 151 PL/s
+#: and 60 vs 23 s of compilation (docs/leo.md)
+UNROLL_MAX_SETS = 128
+
+
+def _ordered_fold(step, init, n):
+    """``step`` applied for j = 0..n-1 to the carry (``lax.scan``'s (carry, j) -> (carry, _)
+    form): unrolled up to ``UNROLL_MAX_SETS`` steps, a scan beyond."""
+    if n <= UNROLL_MAX_SETS:
+        carry = init
+        for j in range(n):
+            carry, _ = step(carry, j)
+        return carry
+    return jax.lax.scan(step, init, jnp.arange(n))[0]
+
+
 def suffix_sums(tail, ni, n_out, other, idx_t):
     """(T, B): for each slot i, ``tail`` + the P_NM shares ``other[j]`` of the slots j the
     walk reaches after it (more sources out, or as many and not earlier in the enumeration
     ``idx_t``), added in the order j = 0..T-1. ``ni`` (T, B) and ``n_out`` (T, B): sources out
-    of each slot. One ``lax.scan`` step per slot: one loop body in the compiled program instead
-    of T unrolled (T, B) updates (at L = 52 under add-v4.2, order 2, T = 1,540: minutes of
-    compilation), the same additions in the same order, so the same bits."""
+    of each slot. Beyond ``UNROLL_MAX_SETS`` slots one ``lax.scan`` step per slot: one loop body
+    in the compiled program instead of T unrolled (T, B) updates (at L = 52 under add-v4.2,
+    order 2, T = 1,540: minutes of compilation), the same additions in the same order."""
     idx_t = jnp.asarray(idx_t)
 
     def step(suffix, j):
@@ -87,16 +106,15 @@ def suffix_sums(tail, ni, n_out, other, idx_t):
         after = (nj > ni) | ((nj == ni) & (idx_t <= j)[:, None])
         return suffix + jnp.where(after, oj, 0.0), None
 
-    suffix, _ = jax.lax.scan(step, jnp.broadcast_to(tail, ni.shape).astype(other.dtype),
-                             jnp.arange(ni.shape[0]))
-    return suffix
+    return _ordered_fold(step, jnp.broadcast_to(tail, ni.shape).astype(other.dtype),
+                         ni.shape[0])
 
 
 def merge_equal_sets(code, sel, pr):
     """(dup, merged), both (T, B): the selected sets ``sel`` with equal exclusion codes
     ``code`` are one mode. ``dup``: an earlier selected set has the code; ``merged``: the sum
     of the priors ``pr`` of the selected sets sharing the code, added in the order j = 0..T-1
-    (one ``lax.scan`` step per set, as ``suffix_sums``)."""
+    (unrolled or one scan, as ``suffix_sums``)."""
     ar = jnp.arange(code.shape[0])
 
     def step(carry, j):
@@ -107,6 +125,5 @@ def merge_equal_sets(code, sel, pr):
         same = (cj == code) & sj & sel
         return (dup | (same & (ar > j)[:, None]), merged + jnp.where(same, pj, 0.0)), None
 
-    (dup, merged), _ = jax.lax.scan(
-        step, (jnp.zeros(sel.shape, bool), jnp.zeros(pr.shape, pr.dtype)), ar)
-    return dup, merged
+    return _ordered_fold(step, (jnp.zeros(sel.shape, bool), jnp.zeros(pr.shape, pr.dtype)),
+                         code.shape[0])
