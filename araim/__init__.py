@@ -148,6 +148,11 @@ from oaraim.araim.filter_monitor import (  # noqa: E402
 __all__ += ["BankOptions", "BankSources", "FilterMonitorEpoch", "LinearModel", "filter_monitor",
             "run_ekf_monitor", "run_linear_monitor", "separation_monitor"]
 
+# the EKF bank's HPL and its gradient with respect to the tower positions (a namespace)
+from oaraim.araim import filter_gradients  # noqa: E402
+
+__all__ += ["filter_gradients"]
+
 # What the other layers use, through this face only (tools/structure.py: "imports past a
 # package's face"); ``mhss``, ``availability`` and ``integrity_risk`` are namespaces.
 from oaraim.araim import availability, integrity_risk, mhss  # noqa: E402
