@@ -153,6 +153,12 @@ from oaraim.araim import filter_gradients  # noqa: E402
 
 __all__ += ["filter_gradients"]
 
+# the filter bank's conditional integrity risk (docs/filter-integrity.md); a namespace too
+from oaraim.araim import filter_risk  # noqa: E402
+from oaraim.araim.filter_risk import epoch_risk_bound  # noqa: E402
+
+__all__ += ["epoch_risk_bound", "filter_risk"]
+
 # What the other layers use, through this face only (tools/structure.py: "imports past a
 # package's face"); ``mhss``, ``availability`` and ``integrity_risk`` are namespaces.
 from oaraim.araim import availability, integrity_risk, mhss  # noqa: E402
