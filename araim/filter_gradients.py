@@ -19,9 +19,9 @@ Two readings of "move a tower":
 
 At the point t = t_0 both give the forward values of ``run_ekf_monitor`` (the correction is
 an exact 0.0; the pass under the gradient is compiled apart, seen to differ by one rounding of
-the HPL, 4e-16 m). Cost (one 2-core CPU, the whole 145 s drive of seed 000, 1,453
-epochs, 7 filters): the value and the gradient 6-7x the forward pass in wall time, 163 MiB of
-residuals (docs/filter-integrity.md); no rematerialisation was needed.
+the HPL, 4e-16 m). Cost (the whole 145 s drive of seed 000, 1,453 epochs, 7 filters, on a
+shared 2-core CPU): the value and the gradient in 0.7-1.3 s, 6.5-9.6x the forward pass, with
+163 MiB of residuals (docs/filter-integrity.md); no rematerialisation was needed.
 """
 
 from functools import partial
