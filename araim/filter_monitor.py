@@ -57,10 +57,11 @@ from oaraim.araim.mhss.projection import ZERO_SEPARATION_RTOL, Projection
 from oaraim.araim.mhss.root import PL_ITERATIONS, pls_from_projection
 from oaraim.araim.status import Status
 
-__all__ = ["BankOptions", "BankSources", "FilterMonitorEpoch", "LINEARISATIONS", "LinearModel",
-           "ekf_bank_step", "epoch_modes_and_used", "exclusion_restart", "false_alert_factors",
-           "linear_update", "n_bank_filters", "run_ekf_monitor", "run_linear_monitor",
-           "separation_monitor"]
+__all__ = ["AugmentedBank", "BankOptions", "BankSources", "ErrorStates", "FilterMonitorEpoch",
+           "LINEARISATIONS", "LinearModel", "augmented_bank", "dense_update", "ekf_bank_step",
+           "ekf_bank_step_augmented", "epoch_modes_and_used", "exclusion_restart",
+           "false_alert_factors", "linear_update", "n_bank_filters", "run_ekf_monitor",
+           "run_linear_monitor", "separation_monitor"]
 
 #: how the EKF bank linearises its sub-filters: 'main' (every sub-filter an error-state filter
 #: about the main filter's trajectory: one mechanization, common Phi, Q_d and H; the separation
@@ -442,3 +443,91 @@ def run_ekf_monitor(state0: _ekf.EkfState, inputs: _ekf.EkfInputs,
         inputs.gyro, inputs.accel, z, jnp.asarray(inputs.valid, bool), inputs.tx_clk_m, p_sat,
         sigma))
     return bank, out
+
+
+# ------------------------------------------------------------------------------------------
+# The EKF bank with correlated measurement-error states
+
+
+class ErrorStates(NamedTuple):
+    """m additive states of the pseudorange errors appended to the EKF's 17 (a Gauss-Markov
+    multipath or clock deviation, a calibration's residual line, ...): per measurement interval
+    x_a <- ``phi`` x_a + w, w ~ N(0, ``q``) ((m, m) each), and each pseudorange's modelled error
+    ``h`` x_a (``h`` (L, m)); ``p0`` (m, m) their prior covariance (uncorrelated with the 17).
+    The caller builds them for its world (``sim.filter_drive.tower_error_states``)."""
+
+    phi: jax.Array
+    q: jax.Array
+    h: jax.Array
+    p0: jax.Array
+
+
+class AugmentedBank(NamedTuple):
+    """A bank whose filters carry ``ErrorStates``: ``ekf`` the EKF states (K leading, ``P``
+    (K, 17 + m, 17 + m) over the error state [seed 000's 17, the m error states]), ``x_a``
+    (K, m) the error states' estimates."""
+
+    ekf: _ekf.EkfState
+    x_a: jax.Array
+
+
+def augmented_bank(state0: _ekf.EkfState, errs: ErrorStates, n_filters: int) -> AugmentedBank:
+    """The bank of ``n_filters`` filters at ``state0`` (P (17, 17)) with the error states at
+    zero and their prior ``errs.p0`` (block diagonal with state0's P)."""
+    m = errs.p0.shape[-1]
+    p = jnp.zeros((_ekf.N_ERR + m,) * 2).at[:_ekf.N_ERR, :_ekf.N_ERR].set(state0.P)
+    p = p.at[_ekf.N_ERR:, _ekf.N_ERR:].set(errs.p0)
+    st = state0._replace(P=p)
+    bank = jax.tree.map(lambda a: jnp.broadcast_to(a, (n_filters,) + a.shape), st)
+    return AugmentedBank(bank, jnp.zeros((n_filters, m)))
+
+
+def _block_diag(a, b):
+    n, m = a.shape[-1], b.shape[-1]
+    out = jnp.zeros((n + m, n + m), jnp.result_type(a, b))
+    return out.at[:n, :n].set(a).at[n:, n:].set(b)
+
+
+def dense_update(P, nu, h, r_var, used):
+    """Kalman update of an error state with dense rows ``h`` (L, n) (masked by ``used`` (L,)),
+    innovations ``nu`` (L,) and variances ``r_var`` (L,); the Joseph form expanded as in
+    ``araim.ekf.kalman_update``. Returns (dx (n,), P+ (n, n))."""
+    hu = h * used[:, None]
+    pht = P @ hu.T
+    s = hu @ pht + jnp.diag(jnp.where(used, r_var, 1.0))
+    s_inv = _ekf.spd_inverse(0.5 * (s + s.T))
+    k = pht @ s_inv
+    dx = k @ jnp.where(used, nu, 0.0)
+    p = P + jnp.concatenate([k @ s - pht, -k], 1) @ jnp.concatenate([k, pht], 1).T
+    return dx, 0.5 * (p + p.T)
+
+
+def ekf_bank_step_augmented(bank: AugmentedBank, inputs: _ekf.EkfInputs, used, tx_pos, params,
+                            errs: ErrorStates) -> AugmentedBank:
+    """``ekf_bank_step`` (sub-filters about the main filter's trajectory) for filters whose
+    error state carries ``errs``: the main filter predicts z = range + clock - tx clock +
+    ``errs.h`` x_a and updates the 17 + m states; each sub-filter's offset delta_i (17 + m) is
+    propagated with the block-diagonal Phi and updated with the main innovations, as in
+    ``ekf_bank_step``. Returns the new bank."""
+    n17 = _ekf.N_ERR
+    main = jax.tree.map(lambda a: a[0], bank.ekf)
+    delta = jnp.concatenate([_offsets(bank.ekf), bank.x_a - bank.x_a[0]], -1)
+    main, phi17, qd17 = _ekf.ekf_propagate(main._replace(P=main.P[:n17, :n17]), inputs.gyro,
+                                           inputs.accel, params)
+    phi = _block_diag(phi17, errs.phi)
+    delta = delta @ phi.T
+    p = phi @ bank.ekf.P @ phi.T + _block_diag(qd17, errs.q)
+    p = 0.5 * (p + jnp.swapaxes(p, -1, -2))
+    x_a0 = errs.phi @ bank.x_a[0]
+    z_hat, u = _ekf.pseudorange_model(main.r, main.clk, tx_pos, inputs.tx_clk_m)
+    nu = inputs.z - (z_hat + errs.h @ x_a0)
+    h = jnp.concatenate([_ekf.jacobian_rows(u), errs.h], 1)
+    r_var = jnp.broadcast_to(jnp.asarray(inputs.sigma_m, jnp.float64) ** 2, z_hat.shape)
+    dx0, p0 = dense_update(p[0], nu, h, r_var, used[0])
+    main = _ekf.inject(main, dx0[:n17], p0)
+    x_a0 = x_a0 + dx0[n17:]
+    dx, p = jax.vmap(dense_update, in_axes=(0, 0, None, None, 0))(
+        p, nu[None] - delta @ h.T, h, r_var, used)
+    delta = delta + dx - dx0[None]
+    x_a = (x_a0[None] + delta[:, n17:]).at[0].set(x_a0)
+    return AugmentedBank(_about(main, delta[:, :n17], p), x_a)

@@ -83,8 +83,9 @@ from oaraim.sim.filter_drive import (  # noqa: E402
     FilterDriveSummary,
     FilterDriveTrace,
     simulate_filter_drive,
+    tower_error_states,
 )
 
 __all__ += ["FaultScenario", "FilterDriveConfig", "FilterDriveSummary", "FilterDriveTrace",
             "draw_faults", "fault_profile_m", "faults", "filter_drive", "no_fault",
-            "simulate_filter_drive"]
+            "simulate_filter_drive", "tower_error_states"]

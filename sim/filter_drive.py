@@ -33,8 +33,8 @@ from oaraim.sim.faults import FaultScenario, fault_profile_m
 from oaraim.sim.measurement import EpochTowers, EpochTruth, drive_epoch
 
 __all__ = ["DEFAULT_CONFIG", "MONITORS", "FilterDriveConfig", "FilterDriveSummary",
-           "FilterDriveTrace", "SEPARATION_SIGMAS", "gm_overbound_variance",
-           "simulate_filter_drive"]
+           "FilterDriveTrace", "SEPARATION_SIGMAS", "TOWER_STATES", "gm_overbound_variance",
+           "simulate_filter_drive", "tower_error_states"]
 
 #: the monitors compared, in the order of the summary's last axis
 MONITORS = ("filter_ss", "ekf_xi_slope", "snapshot_mhss")
@@ -47,7 +47,10 @@ class FilterDriveConfig(NamedTuple):
     towers' one operator are per-epoch priors; ``budget`` the integrity and false-alert
     allocation; ``gm_inflation`` 1 adds the GM overbound to the filters' variance (0: no);
     ``linearisation`` how the bank's sub-filters are linearised
-    (``araim.filter_monitor.LINEARISATIONS``)."""
+    (``araim.filter_monitor.LINEARISATIONS``); ``tower_states`` True augments the bank's
+    filters with each tower's correlated-error states (``tower_error_states``: the world's
+    multipath and clock deviation as Gauss-Markov states, the calibration line's error),
+    exclusive with ``gm_inflation`` (the Xi-slope EKF and the snapshot keep the white model)."""
 
     budget: araim.IntegrityBudget = araim.BUDGET_SEED004_TABLE_I
     p_sat: float = 1e-5
@@ -57,6 +60,7 @@ class FilterDriveConfig(NamedTuple):
     hal_m: float = 30.0
     gm_inflation: float = 0.0
     linearisation: str = "main"
+    tower_states: bool = False
 
 
 #: the settings of ``simulate_filter_drive`` by default
@@ -120,6 +124,59 @@ def gm_overbound_variance(sigma_m, tau_s, dt_s):
     return sigma_m**2 * (1.0 + rho) / (1.0 - rho)
 
 
+#: the correlated-error states ``tower_error_states`` gives each tower, in this order: the
+#: Gauss-Markov multipath, the Gauss-Markov clock deviation epsilon_n, the receiver's clock-fit
+#: line at t (c = a + b t) and its slope b; the pseudorange's modelled error is mp + eps - c
+TOWER_STATES = ("multipath_m", "clk_eps_m", "fit_line_m", "fit_slope_m_s")
+
+
+def _exp_corr(sigma_m, tau_s, lag_s):
+    """sigma^2 exp(-|lag| / tau): the autocovariance of a first-order Gauss-Markov process
+    (0 where sigma is 0)."""
+    return jnp.where(sigma_m > 0, sigma_m**2 * jnp.exp(-jnp.abs(lag_s) / tau_s), 0.0)
+
+
+def tower_error_states(err: ErrorModel, calib_t_s, dt_s, sigma_white_m, n_towers: int):
+    """The ``araim.filter_monitor.ErrorStates`` of the world ``err``'s tower errors, 4 per
+    tower (``TOWER_STATES``), for a filter that knows the world's Gauss-Markov parameters.
+
+    Per measurement interval ``dt_s``: mp <- rho_mp mp + w, eps <- rho_eps eps + w (exact GM
+    steps, process variances sigma^2 (1 - rho^2)), c <- c + dt b, b <- b. The prior at t = 0
+    is the exact joint covariance of (mp(0), eps(0), a, b) where (a, b) is the least-squares
+    line the receiver fitted during the GNSS period (``sim.measurement.calibrate``: the samples
+    ``calib_t_s`` within ``err.calib_window_s`` of t = 0) to y_k = mp(t_k) + eps(t_k) +
+    white(``sigma_white_m``): with A = [1, t_k] and M = (A^T A)^-1 A^T, cov(a, b) = M C_y M^T
+    and cov(mp(0), (a, b)) = M cov(y, mp(0)). The towers are independent (the operator's
+    common clock, an OCXO whose drift is ~mm over the period, is absorbed by the receiver
+    clock and left out). Fewer than 3 calibration samples: no fit, the line states zero."""
+    t = jnp.asarray(calib_t_s, jnp.float64)
+    m = (t > -err.calib_window_s).astype(jnp.float64)
+    ok = jnp.sum(m) > 2
+    a = jnp.stack([m, m * t], -1)
+    ata = a.T @ a + jnp.where(ok, 0.0, 1.0) * jnp.eye(2)
+    mm = jnp.where(ok, jnp.linalg.solve(ata, a.T), 0.0)
+    lag = t[:, None] - t[None, :]
+    c_y = (_exp_corr(err.mp_sigma_m, err.mp_tau_s, lag)
+           + _exp_corr(err.clk_eps_sigma_m, err.clk_eps_tau_s, lag)
+           + jnp.asarray(sigma_white_m, jnp.float64) ** 2 * jnp.eye(t.shape[0]))
+    c_ab = mm @ c_y @ mm.T
+    c_mp = mm @ _exp_corr(err.mp_sigma_m, err.mp_tau_s, t)
+    c_eps = mm @ _exp_corr(err.clk_eps_sigma_m, err.clk_eps_tau_s, t)
+    p4 = jnp.zeros((4, 4))
+    p4 = p4.at[0, 0].set(err.mp_sigma_m**2).at[1, 1].set(err.clk_eps_sigma_m**2)
+    p4 = p4.at[2:, 2:].set(c_ab).at[0, 2:].set(c_mp).at[2:, 0].set(c_mp)
+    p4 = p4.at[1, 2:].set(c_eps).at[2:, 1].set(c_eps)
+    rho_mp = jnp.exp(-dt_s / err.mp_tau_s)
+    rho_eps = jnp.exp(-dt_s / err.clk_eps_tau_s)
+    phi4 = jnp.diag(jnp.stack([rho_mp, rho_eps, 1.0, 1.0])).at[2, 3].set(dt_s)
+    q4 = jnp.diag(jnp.stack([err.mp_sigma_m**2 * (1.0 - rho_mp**2),
+                             err.clk_eps_sigma_m**2 * (1.0 - rho_eps**2), 0.0, 0.0]))
+    eye = jnp.eye(n_towers)
+    h = jnp.kron(eye, jnp.array([[1.0, 1.0, -1.0, 0.0]]))
+    return araim.filter_monitor.ErrorStates(jnp.kron(eye, phi4), jnp.kron(eye, q4), h,
+                                            jnp.kron(eye, p4))
+
+
 @partial(jax.jit, static_argnames=("cfg", "traces"))
 def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultScenario,
                           cfg: FilterDriveConfig = DEFAULT_CONFIG, filter_sigma_pr_m=0.0,
@@ -138,8 +195,16 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
     est0 = _ekf.ekf_init(d.quat_est, d.pos_est_m, d.vel_est_m_s, jnp.zeros(3), jnp.zeros(3),
                          jnp.zeros(2), setup.P0)
     rule = araim.FaultModeRule(cfg.fault_modes)
-    K = araim.filter_monitor.n_bank_filters(n_t, 1, cfg.max_order, rule)
-    bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), est0)
+    fmon = araim.filter_monitor
+    K = fmon.n_bank_filters(n_t, 1, cfg.max_order, rule)
+    if cfg.tower_states:
+        if cfg.gm_inflation:
+            raise ValueError("FilterDriveConfig: tower_states models the Gauss-Markov errors; "
+                             "set gm_inflation=0 (the overbound would count them twice)")
+        errs = tower_error_states(err, setup.calib_t_s, dt_meas, sig_f, n_t)
+        bank0 = fmon.augmented_bank(est0, errs, K)
+    else:
+        bank0 = jax.tree.map(lambda a: jnp.broadcast_to(a, (K,) + a.shape), est0)
     xi0 = raim_init(est0, n_t)
     con = jnp.zeros(n_t, int)
     p_sat = jnp.full(n_t, cfg.p_sat)
@@ -156,24 +221,29 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         bias = fault_profile_m(t_e, fault, n_t)
         z = m.pseudorange_m + bias
         # the solution-separation bank
-        fm, used = araim.filter_monitor.epoch_modes_and_used(valid, con, p_sat, p_const,
-                                                             cfg.budget, rule, cfg.max_order)
-        bank = araim.filter_monitor.ekf_bank_step(
-            bank, _ekf.EkfInputs(m.gyro_rad_s, m.accel_m_s2, z, valid, tclk, sig_f), used,
-            setup.towers, p, cfg.linearisation)
-        ss = araim.separation_monitor(bank.r, bank.P[:, _ekf.POS, _ekf.POS], fm, cfg.budget)
+        fm, used = fmon.epoch_modes_and_used(valid, con, p_sat, p_const, cfg.budget, rule,
+                                             cfg.max_order)
+        inputs = _ekf.EkfInputs(m.gyro_rad_s, m.accel_m_s2, z, valid, tclk, sig_f)
+        if cfg.tower_states:
+            bank = fmon.ekf_bank_step_augmented(bank, inputs, used, setup.towers, p, errs)
+            filters = bank.ekf
+        else:
+            bank = fmon.ekf_bank_step(bank, inputs, used, setup.towers, p, cfg.linearisation)
+            filters = bank
+        ss = araim.separation_monitor(filters.r, filters.P[:, _ekf.POS, _ekf.POS], fm,
+                                      cfg.budget)
         # seed 000's NIS + Xi-slope HPL on the same EKF (no exclusion)
         prior, phi = _ekf.ekf_predict(xi.state, m.gyro_rad_s, m.accel_m_s2, p)
         xi, ro = raim_update(xi, prior, phi, _ekf.EkfInputs(None, None, z, valid, tclk, sig_f),
                              setup.towers, araim.RaimOptions(setup.tables, 0, False, cfg.hal_m))
         # the snapshot MHSS of this epoch, linearised at the main filter's estimate
-        z_hat, u = _ekf.pseudorange_model(bank.r[0], bank.clk[0], setup.towers, tclk)
+        z_hat, u = _ekf.pseudorange_model(filters.r[0], filters.clk[0], setup.towers, tclk)
         src = araim.Sources(u, con, jnp.full(n_t, var_f), jnp.full(n_t, var_f),
                             jnp.zeros(n_t), p_sat, valid)
         sn = araim.separation_kernel(src, p_const, cfg.budget, z - z_hat,
                                      araim.MHSSOptions(cfg.max_order, fault_modes=rule))
-        pos_snap = bank.r[0] + sn.position_m
-        hpe = jnp.stack([jnp.linalg.norm(bank.r[0, :2] - pos_e[:2]),
+        pos_snap = filters.r[0] + sn.position_m
+        hpe = jnp.stack([jnp.linalg.norm(filters.r[0, :2] - pos_e[:2]),
                          jnp.linalg.norm(xi.state.r[:2] - pos_e[:2]),
                          jnp.linalg.norm(pos_snap[:2] - pos_e[:2])])
         hpl = jnp.stack([ss.hpl_m, ro.hpl_m, sn.pl.hpl_m])

@@ -158,13 +158,15 @@ class EkfDriveStudy(Study):
                                "folder (default: temporary)"),
             "chunk": Param(64, count(1), "runs per progress step (never changes a result)"),
             "monitor": Param("ekf-raim", parse_choice("ekf-raim", "filter-ss",
-                                                      "filter-ss-overbound"),
+                                                      "filter-ss-overbound",
+                                                      "filter-ss-states"),
                              "integrity monitor: 'ekf-raim' (the seeds' NIS + Xi-slope HPL) or "
                              "'filter-ss' (also the solution-separation filter bank of "
                              "docs/filter-integrity.md on the same Monte Carlo runs, beside the "
                              "Xi-slope HPL and the snapshot MHSS; the seeds' rows unchanged); "
                              "'filter-ss-overbound': the filters' variance inflated by the GM "
-                             "multipath overbound"),
+                             "multipath overbound; 'filter-ss-states': the filters augmented "
+                             "with each tower's correlated-error states"),
         }
         for key, value in self.calibrated.items():
             self.params[key] = dataclasses.replace(
@@ -216,7 +218,8 @@ class EkfDriveStudy(Study):
         per monitor the misleading epochs after the onset, mean HPL, availability at HAL,
         false alerts and the median detection delay (JSON values)."""
         cfg = sim.FilterDriveConfig(
-            hal_m=p["hal_m"], gm_inflation=float(p["monitor"] == "filter-ss-overbound"))
+            hal_m=p["hal_m"], gm_inflation=float(p["monitor"] == "filter-ss-overbound"),
+            tower_states=p["monitor"] == "filter-ss-states")
         err = world_of(p)._replace(fault_onset_s=np.inf)
         fault = sim.FaultScenario(np.asarray(p["fault_tower"] - 1), np.asarray(
             p["fault_onset_s"]), np.asarray(p["fault_bias_m"]), np.asarray(0.0))
