@@ -488,7 +488,9 @@ def _block_diag(a, b):
     return out.at[:n, :n].set(a).at[n:, n:].set(b)
 
 
-def dense_update(P, nu, h, r_var, used):
+def dense_update(P: Float[ArrayLike, "n n"], nu: Float[ArrayLike, " L"],
+                 h: Float[ArrayLike, "L n"], r_var: Float[ArrayLike, " L"],
+                 used: Bool[ArrayLike, " L"]) -> tuple[Float[Array, " n"], Float[Array, "n n"]]:
     """Kalman update of an error state with dense rows ``h`` (L, n) (masked by ``used`` (L,)),
     innovations ``nu`` (L,) and variances ``r_var`` (L,); the Joseph form expanded as in
     ``araim.ekf.kalman_update``. Returns (dx (n,), P+ (n, n))."""
@@ -502,8 +504,9 @@ def dense_update(P, nu, h, r_var, used):
     return dx, 0.5 * (p + p.T)
 
 
-def ekf_bank_step_augmented(bank: AugmentedBank, inputs: _ekf.EkfInputs, used, tx_pos, params,
-                            errs: ErrorStates) -> AugmentedBank:
+def ekf_bank_step_augmented(bank: AugmentedBank, inputs: _ekf.EkfInputs,
+                            used: Bool[ArrayLike, "K L"], tx_pos: Float[ArrayLike, "L 3"],
+                            params: _ekf.EkfParams, errs: ErrorStates) -> AugmentedBank:
     """``ekf_bank_step`` (sub-filters about the main filter's trajectory) for filters whose
     error state carries ``errs``: the main filter predicts z = range + clock - tx clock +
     ``errs.h`` x_a and updates the 17 + m states; each sub-filter's offset delta_i (17 + m) is
