@@ -52,6 +52,7 @@ import numpy as np
 
 from oaraim.araim import ekf as _ekf
 from oaraim.araim import ekf_raim as _er
+from oaraim.araim import filter_gradients as _fg
 from oaraim.araim import filter_monitor as _fm
 from oaraim.araim.budget import BUDGET_SEED004_TABLE_I, IntegrityBudget
 from oaraim.errors import imu
@@ -365,14 +366,9 @@ class FilterReplayConfig(NamedTuple):
     linearisation: str = "main"
 
 
-def replay_filter_monitor(rec: recording.Recording,
-                          config: FilterReplayConfig | None = None) -> FilterReplay:
-    """The solution-separation filter bank (``araim.run_ekf_monitor``, docs/filter-integrity.md)
-    over a recorded drive: the same preparation, initial state and EKF as ``replay_ekf_raim``,
-    every tower one source of one operator (P_s ``config.p_sat`` per epoch, P_const
-    ``config.p_const``), order 1 of ``config.fault_modes``; ``config.exclusion``: exclusion by
-    restart (``araim.filter_monitor.exclusion_restart``)."""
-    c = FilterReplayConfig() if config is None else config
+def _filter_bank_setup(rec: recording.Recording, c: FilterReplayConfig):
+    """(prepared recording, initial state source, ``run_ekf_monitor``'s arguments) of
+    ``replay_filter_monitor`` and ``replay_filter_gradient``."""
     sigma_pr_m, spec, init_uncertainty = c.sigma_pr_m, c.spec, c.init_uncertainty
     init_uncertainty = _er.InitialUncertainty() if init_uncertainty is None else init_uncertainty
     if not (np.isfinite(sigma_pr_m) and sigma_pr_m > 0):
@@ -391,17 +387,71 @@ def replay_filter_monitor(rec: recording.Recording,
     sources = _fm.BankSources(np.zeros(n_t, int), np.full(n_t, c.p_sat), np.array([c.p_const]))
     options = _fm.BankOptions(c.budget, 1, c.fault_modes, exclusion=bool(c.exclusion),
                               linearisation=c.linearisation)
-    _, out = _fm.run_ekf_monitor(est0, inputs, jnp.asarray(prep.towers), params, sources,
-                                 options)
+    return prep, src, (est0, inputs, jnp.asarray(prep.towers), params, sources, options)
+
+
+def _truth_at(rec, t_s):
+    """(E, 3) the recording's true ENU position at ``t_s``, nan outside its truth table."""
+    tr = recording_frame.truth_enu(rec)
+    inside = (t_s >= tr.t_s[0] - 1e-9) & (t_s <= tr.t_s[-1] + 1e-9)
+    truth = _interp(t_s, tr.t_s, tr.position_enu_m)
+    truth[~inside] = np.nan
+    return truth
+
+
+def replay_filter_monitor(rec: recording.Recording,
+                          config: FilterReplayConfig | None = None) -> FilterReplay:
+    """The solution-separation filter bank (``araim.run_ekf_monitor``, docs/filter-integrity.md)
+    over a recorded drive: the same preparation, initial state and EKF as ``replay_ekf_raim``,
+    every tower one source of one operator (P_s ``config.p_sat`` per epoch, P_const
+    ``config.p_const``), order 1 of ``config.fault_modes``; ``config.exclusion``: exclusion by
+    restart (``araim.filter_monitor.exclusion_restart``)."""
+    c = FilterReplayConfig() if config is None else config
+    prep, src, args = _filter_bank_setup(rec, c)
+    _, out = _fm.run_ekf_monitor(*args)
     out = jax.tree.map(np.asarray, out)
     err2 = None
     if rec.truth is not None:
-        tr = recording_frame.truth_enu(rec)
-        inside = (prep.t_s >= tr.t_s[0] - 1e-9) & (prep.t_s <= tr.t_s[-1] + 1e-9)
-        truth = _interp(prep.t_s, tr.t_s, tr.position_enu_m)
-        truth[~inside] = np.nan
+        truth = _truth_at(rec, prep.t_s)
         err2 = np.hypot(*(out.position_m[:, :2] - truth[:, :2]).T)
     return FilterReplay(prep.t_s, out, err2, np.asarray(prep.tx_ids), src)
+
+
+class FilterGradientReplay(NamedTuple):
+    """What ``replay_filter_gradient`` returns (NumPy arrays)."""
+
+    t_s: np.ndarray
+    """(E,) epoch times, s."""
+    gradient: _fg.TowerGradient
+    """The objective (m), its gradient (L, 3) with respect to the towers' ENU positions (m/m),
+    the epochs in it and the bank's per-epoch outputs."""
+    tx_ids: np.ndarray
+    """(L,) transmitter ids, the rows of the gradient."""
+    towers_enu_m: np.ndarray
+    """(L, 3) the towers' positions in the recording's ENU frame, m."""
+
+
+def replay_filter_gradient(rec: recording.Recording, config: FilterReplayConfig | None = None,
+                           objective: str = "mean",
+                           placement: bool = True) -> FilterGradientReplay:
+    """The filter bank of ``replay_filter_monitor`` over a recorded (or synthesized) drive and
+    the gradient of its HPL with respect to the tower positions
+    (``araim.filter_gradients.hpl_gradient_wrt_towers``; ``objective`` 'mean' or 'last').
+    ``placement`` True: the pseudoranges follow the towers about the recording's truth (needs
+    a truth table covering every epoch; the measurement errors held); False: the pseudoranges
+    held (the sensitivity to the towers' surveyed coordinates)."""
+    c = FilterReplayConfig() if config is None else config
+    prep, _, args = _filter_bank_setup(rec, c)
+    truth = None
+    if placement:
+        truth = None if rec.truth is None else _truth_at(rec, prep.t_s)
+        if truth is None or not np.all(np.isfinite(truth)):
+            raise ValueError("placement=True needs the recording's truth at every epoch (a "
+                             "truth table covering the drive); pass placement=False for the "
+                             "gradient with the pseudoranges held")
+    g = _fg.hpl_gradient_wrt_towers(*args, truth, objective)
+    return FilterGradientReplay(prep.t_s, jax.tree.map(np.asarray, g),
+                                np.asarray(prep.tx_ids), np.asarray(prep.towers))
 
 
 def trace_summary(tr: ReplayTrace, fault_onset_s: float | None = None,
