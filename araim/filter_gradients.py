@@ -39,8 +39,9 @@ from oaraim.araim.status import Status
 __all__ = ["OBJECTIVES", "TowerGradient", "hpl_gradient_wrt_towers"]
 
 #: what is differentiated: 'mean' the mean HPL over the epochs whose status is OK (their count
-#: taken at the point: an epoch whose status flips is a jump, not a slope), 'last' the last
-#: epoch's HPL (inf and a zero gradient where its status is not OK)
+#: taken at the point: an epoch whose status flips is a jump, not a slope; inf and a zero
+#: gradient when no epoch has one), 'last' the last epoch's HPL (inf and a zero gradient where
+#: its status is not OK)
 OBJECTIVES = ("mean", "last")
 
 
@@ -70,7 +71,7 @@ def _objective(tx_pos, state0, inputs, params, sources, options, truth_pos_m, ob
     n = jnp.sum(ok)
     # HPL is inf where the status is not OK: the outer where gives it a zero cotangent
     total = jnp.sum(jnp.where(ok, out.hpl_m, 0.0))
-    return total / jnp.maximum(n, 1), (n, out)
+    return jnp.where(n > 0, total / jnp.maximum(n, 1), jnp.inf), (n, out)
 
 
 @partial(jax.jit, static_argnames=("options", "objective"))

@@ -121,7 +121,8 @@ def test_the_two_readings_differ_and_the_values_are_the_banks():
 def test_epochs_without_a_pl_and_an_unused_tower_give_a_finite_gradient():
     """A sixth tower that is never valid and a P_s of 1e-2 at epochs 20-29 (P_NM above
     P_thresh there: UNMONITORED_RISK, HPL inf): the mean runs over the 40 other epochs, the
-    gradient is finite, exactly 0 for the unused tower, and equals central differences."""
+    gradient is finite, exactly 0 for the unused tower, and equals central differences; with
+    P_s = 1e-2 at every epoch the objective is inf and its gradient 0."""
     setup, truth, est0, inputs, sources, options = _drive()
     e, n_t = inputs.z.shape
     tx = np.concatenate([np.asarray(setup.towers), [[500.0, 2500.0, 30.0]]])
@@ -145,6 +146,11 @@ def test_epochs_without_a_pl_and_an_unused_tower_give_a_finite_gradient():
     fd = _central_differences(lambda t: _objective(t, in6, src6, False), tx, comps)
     for lk in comps:
         assert g[lk] == pytest.approx(fd[lk], rel=0.0, abs=ATOL)
+    # no epoch with a PL: the objective is inf, its gradient 0 (not NaN)
+    none = araim.filter_gradients.hpl_gradient_wrt_towers(
+        est0, in6, tx, setup.params, src6._replace(p_sat=np.full((e, n_t + 1), 1e-2)), options)
+    assert int(none.n_epochs) == 0 and float(none.hpl_m) == np.inf
+    assert np.all(np.asarray(none.grad_m_per_m) == 0.0)
 
 
 def test_a_gradient_step_lowers_the_mean_hpl_as_predicted():
