@@ -37,8 +37,9 @@ from jax.scipy.special import ndtr
 from jax.typing import ArrayLike
 from jaxtyping import Array, Float
 
-__all__ = ["EpochRisk", "WeightedMean", "epoch_risk_bound", "inside_interval_probability",
-           "log_uniform_nodes", "outside_circle_probability", "weighted_mean"]
+__all__ = ["CRUDE_CHECK_Z", "DEFENSIVE", "EpochRisk", "WeightedMean", "crude_check",
+           "epoch_risk_bound", "inside_interval_probability", "log_uniform_nodes",
+           "outside_circle_probability", "source_proposal", "weighted_mean"]
 
 #: Gauss-Legendre nodes of the quadrature over the minor axis (``outside_circle_probability``):
 #: the integrand is a Gaussian of at most 2 WINDOW_SIGMAS standard deviations times a smooth
@@ -48,6 +49,13 @@ QUAD_NODES = 96
 #: half-width of the quadrature window over the minor axis, in its standard deviations: the
 #: mass left out is at most 2 Q(12) = 3.6e-33 (absolute), below any risk of interest
 WINDOW_SIGMAS = 12.0
+#: defensive share of a proposal over the faulty source (``source_proposal``): draws from the
+#: prior itself, so no likelihood ratio exceeds 1 / DEFENSIVE (Hesterberg 1995, as
+#: ``araim.integrity_risk``)
+DEFENSIVE = 0.1
+#: the crude check (``crude_check``) flags |observed - expected| beyond this many standard
+#: errors (two-sided 4.7e-4 under the model, normal)
+CRUDE_CHECK_Z = 3.5
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(QUAD_NODES)
 
 
@@ -190,3 +198,31 @@ def weighted_mean(values, log_weight=None) -> WeightedMean:
     wg = w * g
     return WeightedMean(float(wg.mean()), float(wg.std(ddof=1) / np.sqrt(n)),
                         float(w.sum() ** 2 / np.sum(w**2)), n)
+
+
+def source_proposal(pilot) -> np.ndarray:
+    """The proposal (n,) over n faulty sources from a pilot's per-source risk ``pilot`` (n,)
+    (any non-negative scale): its shares mixed with ``DEFENSIVE`` of the uniform prior.
+    Host NumPy."""
+    p = np.maximum(np.asarray(pilot, float), 0.0)
+    share = p / p.sum() if p.sum() > 0 else np.full(p.size, 1.0 / p.size)
+    return (1.0 - DEFENSIVE) * share + DEFENSIVE / p.size
+
+
+def crude_check(observed, expected, hmi_c, hpl_fraction) -> dict:
+    """Eq. (1) against crude counts where these resolve it (the HPL scaled by c =
+    ``hpl_fraction`` < 1), over n runs: per run the epochs of the event whose probability eq.
+    (1) is (``observed`` (n,)), the sum of those probabilities (``expected`` (n,)) and the
+    epochs with |e_0,H| > c HPL and no alert (``hmi_c`` (n,), which eq. (1) bounds). Under
+    the model the runs' differences observed - expected have mean 0; the standard error is
+    their spread times sqrt(n) (the epochs of a run are correlated), floored at the Poisson
+    sqrt(max(expected, 1)). ``flagged`` where |z| > ``CRUDE_CHECK_Z``. JSON-able dict."""
+    ob, ex, hm = (np.asarray(a, float).ravel() for a in (observed, expected, hmi_c))
+    n = ob.size
+    d = ob - ex
+    se = float(np.sqrt(max(n * d.var(ddof=1) if n > 1 else 0.0, ex.sum(), 1.0)))
+    z = float(d.sum() / se)
+    return {"hpl_fraction": float(hpl_fraction), "observed": int(ob.sum()),
+            "expected": float(ex.sum()), "std_error": se, "z": z,
+            "flagged": bool(abs(z) > CRUDE_CHECK_Z), "hmi_at_fraction": int(hm.sum()),
+            "runs": int(n)}

@@ -216,13 +216,13 @@ def _validate(fm, st, scen, n, hpl_fraction, sigma_scale):
     fn = jax.jit(jax.vmap(lambda k, fl: fm.validation_counts(k, st, fl, hpl_fraction,
                                                              sigma_scale)))
     ob, ex, hmi, _ = fn(keys, f)
-    return fm.validation_summary(ob, ex, hmi, hpl_fraction)
+    return fr.crude_check(ob, ex, hmi, hpl_fraction)
 
 
 @pytest.mark.parametrize("scen", ["fault-free", "step"])
 def test_uav_estimate_agrees_with_crude_count(uav, scen):
     """Where crude Monte Carlo resolves the event (HPL x 0.3: tens of epochs of 32 runs), the
-    crude count of eq. (1)'s event equals the summed probabilities within VALIDATION_Z
+    crude count of eq. (1)'s event equals the summed probabilities within CRUDE_CHECK_Z
     standard errors (the runs' spread), and the no-alert event it bounds is not more
     frequent."""
     fm, st = uav
@@ -255,3 +255,4 @@ def test_uav_importance_estimate_matches_grid(uav):
     assert est["rate"] > 0 and est["std_error"] > 0
     assert abs(est["rate"] - ref) < 4.0 * est["std_error"] + 0.05 * ref, (est, ref)
     assert est["worst"] >= est["rate"]
+

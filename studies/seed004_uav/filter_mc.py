@@ -245,13 +245,6 @@ def validation_counts(key, setup: UavBankSetup, fault, hpl_fraction, sigma_scale
             jnp.sum(outside & ~out.alert & risk), jnp.sum(risk))
 
 
-#: defensive share of the source proposal: draws from the prior itself, so no source's weight
-#: exceeds 1 / DEFENSIVE (Hesterberg 1995, as ``araim.integrity_risk``)
-DEFENSIVE = 0.1
-#: flag of the validation: |observed - expected| beyond this many standard errors (two-sided
-#: 4.7e-4 under the model)
-VALIDATION_Z = 3.5
-
 
 def onset_nodes(t_s, onset_range_s, n=4096):
     """E over the uniform onset prior of the at-risk epochs (those with t >= onset): the mean
@@ -265,15 +258,15 @@ def importance_risk(setup: UavBankSetup, kind, onset_range_s, size_range, n_draw
     "The conditional risk estimate"): the magnitude integrated by quadrature
     (``conditional_risk``), a pilot at the window's middle onset for every faultable source,
     then ``n_draws`` draws of (source, onset): the source from the pilot's shares mixed with
-    ``DEFENSIVE`` of the uniform prior, the onset from its uniform prior. Returns a JSON-able
+    ``araim.filter_risk.DEFENSIVE`` of the uniform prior (``source_proposal``), the onset
+    from its uniform prior. Returns a JSON-able
     dict: ``rate`` E[sum_k P(A_k)] / E[at-risk epochs], ``std_error``, ``ci_low``/``ci_high``
     (normal, 95 %), ``ess``, ``worst`` (the largest P(A_k) over every magnitude node and epoch
     drawn), ``draws``, ``pilot`` (per source)."""
     cand = np.flatnonzero(setup.faultable)
     mid = 0.5 * (onset_range_s[0] + onset_range_s[1])
     pilot = conditional_risk(setup, kind, cand, np.full(cand.size, mid), size_range)
-    share = pilot.sum_risk / max(pilot.sum_risk.sum(), 1e-300)
-    q = (1.0 - DEFENSIVE) * share + DEFENSIVE / cand.size
+    q = araim.filter_risk.source_proposal(pilot.sum_risk)
     k_s, k_o = jax.random.split(key)
     pick = np.asarray(jax.random.choice(k_s, cand.size, (n_draws,), p=jnp.asarray(q)))
     onset = np.asarray(jax.random.uniform(k_o, (n_draws,), minval=onset_range_s[0],
@@ -289,19 +282,3 @@ def importance_risk(setup: UavBankSetup, kind, onset_range_s, size_range, n_draw
             "mean_at_risk_epochs": n_risk,
             "pilot": {str(setup.ids[c]): float(s / max(n, 1)) for c, s, n in
                       zip(cand, pilot.sum_risk, pilot.n_at_risk, strict=True)}}
-
-
-def validation_summary(observed, expected, hmi_c, hpl_fraction):
-    """The check of eq. (1) against crude counts over n runs (``validation_counts`` per run,
-    arrays (n,)): the runs' differences observed - expected have mean 0 under the model; the
-    standard error is the spread of the differences times sqrt(n), floored at the Poisson
-    sqrt(max(expected, 1)). Flags (``flagged``) |z| > ``VALIDATION_Z``. JSON-able dict."""
-    ob, ex, hm = (np.asarray(a, float) for a in (observed, expected, hmi_c))
-    n = ob.size
-    d = ob - ex
-    se = float(np.sqrt(max(n * d.var(ddof=1) if n > 1 else 0.0, ex.sum(), 1.0)))
-    z = float(d.sum() / se)
-    return {"hpl_fraction": float(hpl_fraction), "observed": int(ob.sum()),
-            "expected": float(ex.sum()), "std_error": se, "z": z,
-            "flagged": bool(abs(z) > VALIDATION_Z), "hmi_at_fraction": int(hm.sum()),
-            "runs": int(n)}
