@@ -333,9 +333,9 @@ def _layout(key):
         n_sops, bpp = bpp_count(p), True
         n_carriers = 1 if n_sops else 0
     p_const = [p["p_const_gps"], p["p_const_gal"]] + [p["p_const_sop"]] * n_carriers
-    n_leo = 0 if p["leo"] == "none" else min(p["leo_max"], leo_option.most_in_view(
+    n_leo = 0 if p["leo"] == "none" else leo_option.most_in_view(
         p["leo"], p["duration_s"], p["step_s"], p["leo_mask_deg"], p["lat_deg"], p["lon_deg"],
-        p["height_m"]))
+        p["height_m"], p["leo_max"])
     leo_groups = leo_option.leo_groups(p, n_leo)
     p_const += [p["p_const_leo"]] * leo_groups
     # the order the P_thresh rule needs in the worst case: every slot in view, every source

@@ -63,15 +63,20 @@ def _row_slots(lat_rad, lons_rad, h_m, sat_ecef, sat_ok, mask_rad, *, k):
     return jax.lax.map(one, lons_rad)
 
 
-def most_in_view(spec, duration_s, step_s, mask_deg, lats_deg, lons_deg, h_m):
-    """The most LEO satellites in view at any grid point and epoch."""
+def most_in_view(spec, duration_s, step_s, mask_deg, lats_deg, lons_deg, h_m, cap):
+    """min(``cap``, the most LEO satellites in view at any grid point and epoch): the rows
+    from the equator outwards, stopping at the first that sees ``cap`` (the map keeps at most
+    ``cap`` LEO slots, so more rows would not change the layout; a Starlink-class shell
+    reaches it in the first row)."""
     ecef, ok, _ = leo_orbits(spec, duration_s, step_s)
     lons = jnp.asarray(np.deg2rad(np.asarray(lons_deg, float)))
     most = 0
-    for la in lats_deg:
+    for la in sorted(lats_deg, key=abs):
         n = _row_slots(float(np.deg2rad(la)), lons, float(h_m), jnp.asarray(ecef),
                        jnp.asarray(ok), float(np.deg2rad(mask_deg)), k=1)[3]
         most = max(most, int(jnp.max(n)))
+        if most >= cap:
+            return cap
     return most
 
 
