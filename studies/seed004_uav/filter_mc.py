@@ -153,31 +153,42 @@ def epoch_risks(setup: UavBankSetup, fault, p0_h, magnitudes, hpl_fraction=1.0,
     fault ``fault`` scaled by each of ``magnitudes`` (G,) (the response is linear in the
     magnitude: one bank run), against ``hpl_fraction`` x HPL. ``p0_h`` from
     ``main_covariance``. Returns ``araim.filter_risk.EpochRisk`` of shape (G, E)."""
-    out = fault_response(setup, fault, sigma_scale)
+    return _risks(fault_response(setup, fault, sigma_scale), p0_h, magnitudes, hpl_fraction)
+
+
+def _risks(out, p0_h, magnitudes, hpl_fraction):
+    """``epoch_risks`` from the bank's response ``out`` (``fault_response``)."""
     g = jnp.asarray(magnitudes, jnp.float64)[:, None]
     return araim.filter_risk.epoch_risk_bound(
         p0_h[None], g[..., None] * out.position_m[None, :, :2], hpl_fraction * out.hpl_m[None],
         g[..., None, None] * out.separation_m[None], out.sigma_ss_m[None], out.threshold_m[None])
 
 
-def _draw_risk(setup, p0_h, nodes, weights, kind, source, onset):
+def _draw_risk(setup, p0_h, nodes, weights, ramp, source, onset):
     """(sum over at-risk epochs of E_m[P(A_k)], at-risk epochs, max over m and k of P(A_k))
     of one drawn source and onset, the magnitude integrated by the quadrature (nodes,
-    weights)."""
-    unit = sim.FaultScenario(source, onset, jnp.where(kind == 0, 1.0, 0.0),
-                             jnp.where(kind == 0, 0.0, 1.0))
+    weights); ``ramp`` 0 a step, 1 a ramp."""
+    unit = sim.FaultScenario(source, onset, 1.0 - ramp, ramp)
     r = epoch_risks(setup, unit, p0_h, nodes).p_hmi_bound  # (G, E)
     risk = jnp.asarray(setup.t_s) >= onset
-    per_epoch = jnp.sum(jnp.asarray(weights)[:, None] * r, axis=0)
+    per_epoch = jnp.sum(weights[:, None] * r, axis=0)
     return (jnp.sum(jnp.where(risk, per_epoch, 0.0)), jnp.sum(risk),
             jnp.max(jnp.where(risk[None], r, 0.0)))
 
 
-#: Gauss-Legendre nodes in log m of the magnitude average: P(A_k) peaks over a narrow band
-#: of magnitudes (near where the fault alone puts the error on the HPL, below where the
-#: sub-filter's test sees it; ~0.1 wide in ln m on the flight); 64 nodes reproduce 384 to
-#: 1e-4 relative (tests/test_filter_risk.py), 24 were 1 % off
-MAGNITUDE_NODES = 64
+#: runs per compiled call of ``conditional_risk``
+DRAW_BATCH = 16
+_DRAW_KERNELS = {}
+
+
+def _draw_kernel(setup: UavBankSetup):
+    """The jitted, vmapped ``_draw_risk`` of ``setup`` (one per setup object, kept with it)."""
+    entry = _DRAW_KERNELS.get(id(setup))
+    if entry is None or entry[0] is not setup:
+        fn = jax.jit(jax.vmap(lambda p0, nd, w, rp, s, o: _draw_risk(setup, p0, nd, w, rp, s, o),
+                              in_axes=(None, None, None, None, 0, 0)))
+        entry = _DRAW_KERNELS[id(setup)] = (setup, fn)
+    return entry[1]
 
 
 class ConditionalRisk(NamedTuple):
@@ -196,21 +207,26 @@ class ConditionalRisk(NamedTuple):
 
 
 def conditional_risk(setup: UavBankSetup, kind, sources, onsets_s, size_range, log_weight=None,
-                     n_nodes=MAGNITUDE_NODES):
+                     n_nodes=araim.filter_risk.MAGNITUDE_NODES):
     """``ConditionalRisk`` of the drawn ``sources`` (n,) and ``onsets_s`` (n,) of a ``kind``
     ('step': ``size_range`` the step in m; 'ramp': the slope in m/s), the magnitude
     log-uniform in ``size_range`` integrated by ``n_nodes`` Gauss-Legendre nodes in log m
     (``araim.filter_risk.log_uniform_nodes``); ``log_weight`` the draws' log prior / proposal
     (None: drawn from the prior)."""
     nodes, weights = araim.filter_risk.log_uniform_nodes(size_range[0], size_range[1], n_nodes)
-    k = {"step": 0, "ramp": 1}[kind]
+    ramp = {"step": 0.0, "ramp": 1.0}[kind]
     p0_h = main_covariance(setup)
-    fn = jax.jit(jax.vmap(lambda s, o: _draw_risk(setup, p0_h, nodes, weights, k, s, o)))
+    fn = _draw_kernel(setup)
     src = np.asarray(sources, int)
     on = np.asarray(onsets_s, float)
-    outs = [np.concatenate(x) for x in zip(*[
-        [np.asarray(a) for a in fn(jnp.asarray(src[i:i + 16]), jnp.asarray(on[i:i + 16]))]
-        for i in range(0, src.size, 16)], strict=True)]
+    n, b = src.size, DRAW_BATCH
+    pad = -n % b
+    src_p, on_p = np.concatenate([src, np.repeat(src[:1], pad)]), np.concatenate(
+        [on, np.repeat(on[:1], pad)])
+    outs = [np.concatenate(x)[:n] for x in zip(*[
+        [np.asarray(a) for a in fn(p0_h, jnp.asarray(nodes), jnp.asarray(weights), ramp,
+                                   jnp.asarray(src_p[i:i + b]), jnp.asarray(on_p[i:i + b]))]
+        for i in range(0, src_p.size, b)], strict=True)]
     lw = np.zeros(src.size) if log_weight is None else np.asarray(log_weight, float)
     return ConditionalRisk(outs[0], outs[1], outs[2], lw, src, on)
 
@@ -228,12 +244,13 @@ def validation_counts(key, setup: UavBankSetup, fault, hpl_fraction, sigma_scale
     ``hpl_fraction`` < 1. Per at-risk epoch the event B_k = {|e_0,H| > c HPL} and {|Delta_i*,
     q*| <= T_i*,q*} ((i*, q*) the argmin of eq. (1), the event whose probability eq. (1) is,
     exactly, under the model) is counted in the run (``uav_run_detail``) and its probability
-    summed; also the event {|e_0,H| > c HPL and no alert}, which eq. (1) bounds. Returns
-    (observed B, expected B, observed HMI at c, at-risk epochs)."""
+    summed; also the event {|e_0,H| > c HPL and no alert}, which eq. (1) bounds, and eq. (1)
+    itself (c = 1) summed over the run and its largest value. Returns (observed B, expected B,
+    observed HMI at c, at-risk epochs, sum of P(A_k), largest P(A_k))."""
     x_true, out, _ = uav_run_detail(key, setup, fault, sigma_scale)
     p0_h = main_covariance(setup, sigma_scale)
-    er = epoch_risks(setup, fault, p0_h, jnp.ones(1), hpl_fraction, sigma_scale)
-    er = jax.tree.map(lambda a: a[0], er)
+    resp = fault_response(setup, fault, sigma_scale)
+    er = jax.tree.map(lambda a: a[0], _risks(resp, p0_h, jnp.ones(1), hpl_fraction))
     e0 = jnp.linalg.norm(out.position_m[:, :2] - x_true[:, :2], axis=-1)
     outside = e0 > hpl_fraction * out.hpl_m
     idx = jnp.arange(e0.shape[0])
@@ -241,9 +258,9 @@ def validation_counts(key, setup: UavBankSetup, fault, hpl_fraction, sigma_scale
     t = out.threshold_m[idx, er.mode, er.direction]
     quiet = jnp.where(t > 0.0, jnp.abs(d) <= t, True)
     risk = jnp.asarray(setup.t_s) >= jnp.where(fault.source >= 0, fault.onset_s, -jnp.inf)
+    p1 = jnp.where(risk, _risks(resp, p0_h, jnp.ones(1), 1.0).p_hmi_bound[0], 0.0)
     return (jnp.sum(outside & quiet & risk), jnp.sum(jnp.where(risk, er.p_hmi_bound, 0.0)),
-            jnp.sum(outside & ~out.alert & risk), jnp.sum(risk))
-
+            jnp.sum(outside & ~out.alert & risk), jnp.sum(risk), jnp.sum(p1), jnp.max(p1))
 
 
 def onset_nodes(t_s, onset_range_s, n=4096):
@@ -259,10 +276,10 @@ def importance_risk(setup: UavBankSetup, kind, onset_range_s, size_range, n_draw
     (``conditional_risk``), a pilot at the window's middle onset for every faultable source,
     then ``n_draws`` draws of (source, onset): the source from the pilot's shares mixed with
     ``araim.filter_risk.DEFENSIVE`` of the uniform prior (``source_proposal``), the onset
-    from its uniform prior. Returns a JSON-able
-    dict: ``rate`` E[sum_k P(A_k)] / E[at-risk epochs], ``std_error``, ``ci_low``/``ci_high``
-    (normal, 95 %), ``ess``, ``worst`` (the largest P(A_k) over every magnitude node and epoch
-    drawn), ``draws``, ``pilot`` (per source)."""
+    from its uniform prior. Returns a JSON-able dict: ``rate`` E[sum_k P(A_k)] / E[at-risk
+    epochs], ``std_error``, ``ci_low``/``ci_high`` (normal, 95 %), ``ess``, ``worst`` (the
+    largest P(A_k) over every magnitude node and epoch drawn), ``draws``, ``pilot`` (per
+    source)."""
     cand = np.flatnonzero(setup.faultable)
     mid = 0.5 * (onset_range_s[0] + onset_range_s[1])
     pilot = conditional_risk(setup, kind, cand, np.full(cand.size, mid), size_range)
