@@ -89,3 +89,8 @@ from oaraim.sim.filter_drive import (  # noqa: E402
 __all__ += ["FaultScenario", "FilterDriveConfig", "FilterDriveSummary", "FilterDriveTrace",
             "draw_faults", "fault_profile_m", "faults", "filter_drive", "no_fault",
             "simulate_filter_drive", "tower_error_states"]
+
+# the drive's conditional risk estimate (docs/filter-integrity.md); a namespace
+from oaraim.sim import filter_risk  # noqa: E402
+
+__all__ += ["filter_risk"]

@@ -115,6 +115,14 @@ class FilterDriveTrace(NamedTuple):
     """(E,) the filter monitor's largest |separation| / threshold."""
     worst_mode: jax.Array
     """(E,) the bank filter (1..K-1) of that largest ratio (0: none monitored)."""
+    monitor: araim.FilterMonitorEpoch | None = None
+    """the bank's ``araim.FilterMonitorEpoch`` per epoch (leading axis E): positions,
+    separations, sigma_ss, thresholds and HPL, what ``sim.filter_risk``'s conditional
+    estimate reads."""
+    p0_h_m2: jax.Array | None = None
+    """(E, 2, 2) the main filter's horizontal position covariance, m^2."""
+    truth_m: jax.Array | None = None
+    """(E, 3) the true position (the frame of ``monitor.position_m``)."""
 
 
 def gm_overbound_variance(sigma_m, tau_s, dt_s):
@@ -255,13 +263,16 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         zabs = jnp.where(sss > 0, jnp.abs(ss.separation_m) / jnp.where(sss > 0, sss, 1.0), 0.0)
         tests = ss.monitored[:, None] & (sss > 0)
         n_over = jnp.stack([jnp.sum(tests & (zabs > k)) for k in SEPARATION_SIGMAS])
+        # the bank's own epoch, for the conditional estimate (sim.filter_risk): traces only
+        extra = (ss, filters.P[0][_ekf.POS, _ekf.POS][:2, :2], pos_e) if traces else ()
         return (world, bank, xi), (hpe, hpl, alert, bias[jnp.clip(fault.source, 0)], ss.status,
-                                   ss.test_ratio, jnp.argmax(ratio), jnp.sum(tests), n_over)
+                                   ss.test_ratio, jnp.argmax(ratio), jnp.sum(tests), n_over,
+                                   extra)
 
     n_ep = setup.t_s.shape[0]
     xs = (jnp.arange(n_ep), setup.gyro, setup.accel, setup.t_s, setup.pos[1:n_ep + 1],
           setup.tower_clk_m)
-    _, (hpe, hpl, alert, fb, st, tr, wm, n_tests, n_over) = jax.lax.scan(
+    _, (hpe, hpl, alert, fb, st, tr, wm, n_tests, n_over, extra) = jax.lax.scan(
         body, (d.world, bank0, xi0), xs)
     t = setup.t_s[:, None]
     risk = t >= jnp.where(fault.source >= 0, fault.onset_s, -jnp.inf)
@@ -280,5 +291,5 @@ def simulate_filter_drive(key, setup: DriveSetup, err: ErrorModel, fault: FaultS
         n_sep_tests=jnp.sum(jnp.where(faulted[:, 0], 0, n_tests)),
         n_sep_over=jnp.sum(jnp.where(faulted[:, :1], 0, n_over), 0))
     if traces:
-        return summary, FilterDriveTrace(setup.t_s, hpe, hpl, alert, fb, st, tr, wm)
+        return summary, FilterDriveTrace(setup.t_s, hpe, hpl, alert, fb, st, tr, wm, *extra)
     return summary

@@ -40,7 +40,7 @@ def study_runs():
     for scale in (1.0, 0.2):
         params = study.validate({"duration_s": 20.0, "sigma_scale": scale})
         out[scale] = study.run(params, 16, 0, None)
-    params = study.validate({"duration_s": 20.0, "linearisation": "own"})
+    params = study.validate({"duration_s": 20.0, "linearisation": "own", "conditional": "no"})
     out["own"] = study.run(params, 16, 0, None)
     return out
 
@@ -85,6 +85,29 @@ def test_uav_flight_bank(study_runs):
         assert d["hmi_per_epoch"]["count"] == 0 and d["false_alerts"]["count"] == 0
         assert 5.0 < d["mean_hpl_m"] < 9.0
     assert u["scenarios"]["step"]["detected_runs_pct"] > 25.0
+
+
+def test_conditional_estimate_beside_the_crude_counts(study_runs):
+    """The conditional estimate (docs/filter-integrity.md, "The conditional risk estimate") on
+    the same runs: at the default no scenario's crude check at 0.3 HPL flags the model, and
+    every estimate lies inside its allocation and below the crude counts' upper bound, on the
+    drive and on the UAV flight; with the filters told a fifth of the sigma the crude check
+    flags the drive's model and the conditional check fails (it can fail)."""
+    m = study_runs[1.0].metrics
+    for cond, crude in ((m["conditional"], m["scenarios"]),
+                        (m["uav"]["conditional"], m["uav"]["scenarios"])):
+        assert cond["passed"]
+        for scen in ("fault-free", "step", "ramp"):
+            d = cond["scenarios"][scen]
+            assert not d["validation"]["flagged"] and d["validation"]["expected"] > 1, d
+            assert 0.0 < d["rate"] <= d["ci_high"] < d["allocation"], d
+            c = crude[scen]
+            c = c["filter_ss"] if "filter_ss" in c else c
+            assert d["ci_high"] < c["hmi_per_epoch"]["ci_high"]
+    assert m["conditional"]["check_passed"]
+    bad = study_runs[0.2].metrics["conditional"]
+    assert bad["scenarios"]["fault-free"]["validation"]["flagged"]
+    assert not bad["check_passed"]
 
 
 def test_bank_main_filter_is_the_xi_slope_filter(study_runs):
