@@ -193,6 +193,8 @@ class FilterIntegrity(Study):
     }
 
     def check(self, params):
+        """Refuses the GM overbound together with the towers' error states (both model the
+        same errors)."""
         if params["tower_states"] == "yes" and params["gm_overbound"] == "yes":
             raise ValueError("tower_states=yes models the Gauss-Markov errors the GM overbound "
                              "inflates for; set gm_overbound=no (or tower_states=no)")
