@@ -23,8 +23,7 @@ from oaraim.sim.drive import DriveSetup
 from oaraim.sim.faults import FaultScenario, no_fault
 from oaraim.sim.filter_drive import DEFAULT_CONFIG, FilterDriveConfig, simulate_filter_drive
 
-__all__ = ["DriveResponse", "drive_epoch_risks", "drive_fault_free", "drive_response",
-           "drive_validation_counts"]
+__all__ = ["DriveResponse", "drive_epoch_risks", "drive_response", "drive_validation_counts"]
 
 
 class DriveResponse(NamedTuple):
@@ -66,15 +65,6 @@ def _response(tf, m0):
     return DriveResponse(mf.position_m - m0.position_m, mf.separation_m - m0.separation_m,
                          tf.p0_h_m2, mf.hpl_m, mf.sigma_ss_m, mf.threshold_m,
                          mf.position_m - tf.truth_m, mf.separation_m, mf.alert)
-
-
-@partial(jax.jit, static_argnames=("cfg",))
-def drive_fault_free(key, setup: DriveSetup, err: ErrorModel,
-                     cfg: FilterDriveConfig = DEFAULT_CONFIG, filter_sigma_pr_m=0.0):
-    """``DriveResponse`` of the fault-free run of ``key`` (one run; the response is 0)."""
-    _, tr = simulate_filter_drive(key, setup, err, no_fault(), cfg, filter_sigma_pr_m,
-                                  traces=True)
-    return _response(tr, tr.monitor)
 
 
 def drive_epoch_risks(resp: DriveResponse, scale, hpl_fraction=1.0):

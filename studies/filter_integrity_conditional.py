@@ -39,22 +39,20 @@ class DriveCase(NamedTuple):
 
 
 @functools.cache
-def _risk_kernel(cfg, kind, lo, hi):
-    """Jitted, vmapped over (key, source, onset, m_ref): per magnitude node the sum over the
-    at-risk epochs of P(A_k) (G,), the response taken at m_ref and scaled; the at-risk epochs;
-    the largest P(A_k)."""
-    nodes, _ = araim.filter_risk.log_uniform_nodes(lo, hi, MAGNITUDE_NODES)
-
-    def one(key, source, onset, m_ref, setup, err, sigma_f):
-        f = sim.FaultScenario(source, onset, m_ref if kind == "step" else 0.0 * m_ref,
-                              m_ref if kind == "ramp" else 0.0 * m_ref)
+def _risk_kernel(cfg):
+    """Jitted, vmapped over (key, source, onset, m_ref): per magnitude node (``nodes`` (G,),
+    m) the sum over the at-risk epochs of P(A_k) (G,), the response of a step (``ramp`` 0) or
+    ramp (1) of m_ref scaled to each node; the at-risk epochs; the largest P(A_k). One
+    compiled kernel for both kinds."""
+    def one(key, source, onset, m_ref, nodes, ramp, setup, err, sigma_f):
+        f = sim.FaultScenario(source, onset, m_ref * (1.0 - ramp), m_ref * ramp)
         resp = sim.filter_risk.drive_response(key, setup, err, f, cfg, sigma_f)
-        r = sim.filter_risk.drive_epoch_risks(resp, jnp.asarray(nodes) / m_ref).p_hmi_bound
+        r = sim.filter_risk.drive_epoch_risks(resp, nodes / m_ref).p_hmi_bound
         risk = setup.t_s >= onset
         return (jnp.sum(jnp.where(risk[None], r, 0.0), axis=1), jnp.sum(risk),
                 jnp.max(jnp.where(risk[None], r, 0.0)))
 
-    return jax.jit(jax.vmap(one, in_axes=(0, 0, 0, 0, None, None, None)))
+    return jax.jit(jax.vmap(one, in_axes=(0, 0, 0, 0, None, None, None, None, None)))
 
 
 def _pad(a, i, m):
@@ -63,14 +61,14 @@ def _pad(a, i, m):
     return jnp.concatenate([a[i:i + m], jnp.repeat(a[i:i + 1], BATCH - m, 0)])
 
 
-def _batched(fn, case, *per_run):
-    """``fn`` over the runs (``per_run`` arrays, one row per run) in BATCH-sized calls; its
-    outputs concatenated."""
+def _batched(fn, case, per_run, shared=()):
+    """``fn`` over the runs (``per_run`` arrays, one row per run) in BATCH-sized calls, with
+    the ``shared`` arguments; its outputs concatenated."""
     outs = []
     n = len(per_run[0])
     for i in range(0, n, BATCH):
         m = min(BATCH, n - i)
-        o = fn(*(_pad(a, i, m) for a in per_run), case.setup, case.err, case.sigma_f)
+        o = fn(*(_pad(a, i, m) for a in per_run), *shared, case.setup, case.err, case.sigma_f)
         outs.append([np.asarray(x)[:m] for x in o])
     return [np.concatenate(x) for x in zip(*outs, strict=True)]
 
@@ -91,14 +89,15 @@ def drive_importance_risk(case: DriveCase, kind, onset_s, size_range, n_draws, k
     n_t = int(case.setup.towers.shape[0])
     lo, hi = float(size_range[0]), float(size_range[1])
     nodes, weights = araim.filter_risk.log_uniform_nodes(lo, hi, MAGNITUDE_NODES)
-    fn = _risk_kernel(case.cfg, kind, lo, hi)
+    fn = _risk_kernel(case.cfg)
+    shared = (jnp.asarray(nodes), {"step": 0.0, "ramp": 1.0}[kind])
     k_p, k_r, k_s, k_o = jax.random.split(key, 4)
     mid = np.full(2 * n_t, 0.5 * (onset_s[0] + onset_s[1]))
     pk = jax.random.split(k_p, n_t)
     pk = jnp.concatenate([pk, pk])
     m_a, m_b = np.sqrt(lo * hi), lo ** 0.75 * hi ** 0.25
-    per_node, n_pilot, worst_p = _batched(fn, case, pk, np.tile(np.arange(n_t), 2), mid,
-                                          np.repeat([m_a, m_b], n_t))
+    per_node, n_pilot, worst_p = _batched(
+        fn, case, (pk, np.tile(np.arange(n_t), 2), mid, np.repeat([m_a, m_b], n_t)), shared)
     s1, s2 = per_node[n_t:] @ weights, per_node[:n_t] @ weights
     m_star = np.where(per_node[:n_t].max(1) > 0, nodes[np.argmax(per_node[:n_t], axis=1)], m_a)
     q = araim.filter_risk.source_proposal(s2)
@@ -106,7 +105,7 @@ def drive_importance_risk(case: DriveCase, kind, onset_s, size_range, n_draws, k
     onset = np.asarray(jax.random.uniform(k_o, (n_draws,), minval=onset_s[0],
                                           maxval=onset_s[1]))
     keys = jax.random.split(k_r, n_draws)
-    per_draw, _, worst = _batched(fn, case, keys, pick, onset, m_star[pick])
+    per_draw, _, worst = _batched(fn, case, (keys, pick, onset, m_star[pick]), shared)
     est = araim.filter_risk.weighted_mean(per_draw @ weights, np.log(1.0 / n_t) - np.log(q[pick]))
     t = np.asarray(case.setup.t_s)
     grid = onset_s[0] + (np.arange(4096) + 0.5) / 4096 * (onset_s[1] - onset_s[0])
@@ -122,12 +121,12 @@ def drive_importance_risk(case: DriveCase, kind, onset_s, size_range, n_draws, k
 
 
 @functools.cache
-def _validation_kernel(cfg, fault_free):
+def _validation_kernel(cfg):
     """Jitted, vmapped over (key, fault): ``sim.filter_risk.drive_validation_counts`` at
-    ``HPL_FRACTION`` (fault-free: one run, the response 0)."""
+    ``HPL_FRACTION`` (a fault-free batch too: its response is exactly 0; one compiled kernel
+    for every scenario)."""
     def one(key, fault, setup, err, sigma_f):
-        resp = (sim.filter_risk.drive_fault_free(key, setup, err, cfg, sigma_f) if fault_free
-                else sim.filter_risk.drive_response(key, setup, err, fault, cfg, sigma_f))
+        resp = sim.filter_risk.drive_response(key, setup, err, fault, cfg, sigma_f)
         return sim.filter_risk.drive_validation_counts(resp, setup.t_s, fault, HPL_FRACTION)
     return jax.jit(jax.vmap(one, in_axes=(0, 0, None, None, None)))
 
@@ -136,8 +135,7 @@ def drive_validation(case: DriveCase, keys, faults):
     """``sim.filter_risk.drive_validation_counts`` of the study's own runs (``keys`` (B, ...)
     and ``faults`` a ``sim.FaultScenario`` batch of B): (observed, expected, HMI at c, at-risk
     epochs, sum of P(A_k), largest P(A_k)) (B,) each."""
-    free = bool(np.all(np.asarray(faults.source) < 0))
-    out = _validation_kernel(case.cfg, free)(keys, faults, case.setup, case.err, case.sigma_f)
+    out = _validation_kernel(case.cfg)(keys, faults, case.setup, case.err, case.sigma_f)
     return tuple(np.asarray(x) for x in out)
 
 
