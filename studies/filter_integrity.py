@@ -254,6 +254,7 @@ class FilterIntegrity(Study):
             c_rows, metrics["conditional"] = fic.drive_rows(
                 case, dval, p, min(realizations, fic.MAX_RUNS), seed, onset, budget)
             rows[-1:-1] = c_rows
+            ds = ds.assign(fic.dataset_vars(metrics["conditional"], "cond"))
         if p["uav"] == "yes":
             uav_vars, uav_rows, uav_metrics = self._uav(p, realizations, seed, budget, progress)
             ds = ds.assign(uav_vars)
@@ -380,6 +381,7 @@ class FilterIntegrity(Study):
             c_rows, metrics["conditional"] = fic.uav_rows(st, uval, p, min(n, fic.MAX_RUNS), seed,
                                                           onset, budget)
             rows.extend(c_rows)
+            v.update(fic.dataset_vars(metrics["conditional"], "uav_cond"))
         return v, rows, metrics
 
     @staticmethod
@@ -524,8 +526,9 @@ class FilterIntegrity(Study):
         return rows, metrics
 
     def plot(self, out_dir):
-        """risk.png (measured P(HMI) with CIs vs the allocation), pl.png (HPL distributions)
-        and ramp_run.png (one ramp run's HPE, HPLs and alerts)."""
+        """risk.png (measured P(HMI) with CIs vs the allocation), pl.png (HPL distributions),
+        ramp_run.png (one ramp run's HPE, HPLs and alerts) and conditional.png (the conditional
+        estimate beside the crude count)."""
         import matplotlib
 
         matplotlib.use("Agg")
@@ -628,6 +631,8 @@ class FilterIntegrity(Study):
         plt.close(fig)
         if "uav_trace_t_s" in ds:
             files.append(self._plot_uav(ds, out_dir, plt))
+        if "cond_rate" in ds:
+            files.append(fic.plot_conditional(ds, out_dir, plt))
         return files
 
     @staticmethod

@@ -259,3 +259,64 @@ def check_row(passed):
             "reproduced": float(passed),
             "note": "1 pass, 0 fail; sigma_scale < 1 (an injected model error) must fail it, "
                     "through the crude check"}
+
+
+def dataset_vars(metrics, prefix):
+    """The conditional estimate's numbers as dataset variables over the scenarios
+    (``prefix``_rate, _ci_low, _ci_high, _worst, _allocation, _check_z) from ``drive_rows``'
+    or ``uav_rows``' metrics."""
+    per = metrics["scenarios"]
+    scen = ("fault-free", "step", "ramp")
+    cols = {"rate": lambda d: d["rate"], "ci_low": lambda d: d["ci_low"],
+            "ci_high": lambda d: d["ci_high"], "worst": lambda d: d["worst"],
+            "allocation": lambda d: d["allocation"], "check_z": lambda d: d["validation"]["z"]}
+    return {f"{prefix}_{k}": ("scenario", np.array([f(per[s]) for s in scen], float))
+            for k, f in cols.items()}
+
+
+def plot_conditional(ds, out_dir, plt):
+    """conditional.png: per scenario and platform the conditional estimate with its 95 %
+    interval and its largest epoch value, the crude count's 95 % upper bound and the
+    allocation, on one log scale. Returns the file's path."""
+    from oaraim.mc import clopper_pearson
+
+    scen = list(ds["scenario"].values)
+    fig, ax = plt.subplots(figsize=(8.0, 4.4))
+    plats = [("cond", "seed 000 drive", "n_misleading", "n_at_risk", "C0")]
+    if "uav_cond_rate" in ds:
+        plats.append(("uav_cond", "UAV flight (seed 004)", "uav_n_misleading", "uav_n_at_risk",
+                      "C1"))
+    for pi, (pre, label, k_name, n_name, color) in enumerate(plats):
+        for si in range(len(scen)):
+            x = si + (pi - 0.5 * (len(plats) - 1)) * 0.3
+            rate = float(ds[f"{pre}_rate"].values[si])
+            lo, hi = (float(ds[f"{pre}_ci_{s}"].values[si]) for s in ("low", "high"))
+            ax.plot([x, x], [max(lo, 1e-30), hi], color=color, lw=3)
+            ax.plot(x, rate, "D", color=color, ms=5,
+                    label=f"{label}: conditional estimate (eq. 1), 95 % CI" if si == 0 else None)
+            ax.plot(x + 0.06, float(ds[f"{pre}_worst"].values[si]), "_", color=color, ms=9,
+                    mew=2, label="largest epoch value (its platform's colour)"
+                    if si == 0 and pi == 0 else None)
+            k = ds[k_name].values[si]
+            k = int(k[:, 0].sum()) if k.ndim == 2 else int(k.sum())
+            _, up = clopper_pearson(k, int(ds[n_name].values[si].sum()))
+            ax.plot(x - 0.06, up, "v", color=color, mfc="none", ms=6,
+                    label=f"{label}: crude count, 95 % upper bound" if si == 0 else None)
+            alloc = float(ds[f"{pre}_allocation"].values[si])
+            ax.plot([x - 0.12, x + 0.12], [alloc, alloc], "k--", lw=1,
+                    label="allocation (PHMI_H; PHMI_H / P_s under a fault)"
+                    if si == 0 and pi == 0 else None)
+    ax.set_yscale("log")
+    ax.set_ylim(1e-22, 1.0)
+    ax.set_xlim(-0.6, len(scen) - 0.4)
+    ax.set_xticks(range(len(scen)), scen)
+    ax.set_ylabel("P(HPE > HPL, no alert) per at-risk epoch")
+    ax.set_title("Filter bank: conditional estimate (an upper bound, eq. 1) vs crude count",
+                 fontsize=9)
+    ax.grid(alpha=0.3, which="major")
+    ax.legend(fontsize=6.5, loc="lower right")
+    fig.tight_layout()
+    path = f"{out_dir}/conditional.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
