@@ -37,6 +37,12 @@ of the model's variances); the fault hits a source in view the whole flight. Its
 for a fault is PHMI_H / P_s^SOP (1e-4: the stricter of GPS and SOP). The UAV has no IMU and no
 Xi-slope HPL here: the bank alone.
 
+Beside the crude counts, ``conditional=yes`` (the default) estimates each scenario's P(HMI)
+bound by eq. (1) of ``araim.filter_risk`` (``studies/filter_integrity_conditional.py``):
+the Gaussian factors computed, the fault magnitude by quadrature, the faulty source
+importance sampled, with a crude check at 0.3 HPL on the study's own runs that flags a wrong
+model (docs/filter-integrity.md, "The conditional risk estimate"; conditional.png).
+
 Choices (the seeds give none): P_s = 1e-5 per tower and epoch, P_const = 1e-8 for the operator
 (below P_THRES: the operator mode is left in P_NM, as a common operator bias goes into the
 receiver clock), seed 004 Table I budget, HAL 30 m (seed 001), the clean world by default
