@@ -202,6 +202,9 @@ CALLS = {
             state, araim.ekf.EkfInputs(jnp.zeros((E, n, 3)), jnp.stack([imu] * E),
                                        jnp.stack([z6] * E), jnp.ones((E, 6), bool),
                                        jnp.zeros((E, 6)), 1.0), tw, params, bank_src, bank_opt),
+        "epoch_risk_bound": lambda: araim.epoch_risk_bound(
+            jnp.broadcast_to(jnp.eye(2), (E, 2, 2)), jnp.zeros((E, 2)), jnp.full(E, 5.0),
+            jnp.zeros((E, 3, 3)), jnp.ones((E, 3, 3)), jnp.full((E, 3, 3), 5.0)),
     },
     "geometry": {
         "geodetic_to_ecef": lambda: geometry.geodetic_to_ecef(np.zeros(4), 0.1, 10),
