@@ -150,7 +150,7 @@ class FilterIntegrity(Study):
     default_realizations = 160
     quick_realizations = 16
     quick_sets = {"duration_s": 60.0}
-    quick_cost_s = 150
+    quick_cost_s = 190
     max_realizations = 100_000
     #: the generic tests of tests/test_studies.py cap realizations at this (a realization is a
     #: whole drive through a bank of 7 EKFs)
