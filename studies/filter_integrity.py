@@ -101,10 +101,6 @@ def _range(name, v):
     return f"{lo:g},{hi:g}"
 
 
-def _pair(text):
-    return tuple(float(x) for x in text.split(","))
-
-
 @functools.cache
 def _kernel(cfg):
     """The jitted vmapped drive of one config (static)."""
@@ -397,7 +393,7 @@ class FilterIntegrity(Study):
             nf = sim.no_fault()
             return jax.tree.map(lambda x: jnp.broadcast_to(x, (MC_BATCH,)), nf)
         keys = mc.realization_keys(seed, cell + si, start, MC_BATCH)
-        size = _pair(p["step_m"] if scen == "step" else p["ramp_m_s"])
+        size = fic.fault_size_range(p, scen)
         draw = jax.vmap(lambda k: jax.tree.map(lambda x: x[0], sim.draw_faults(
             k, 1, n_t, scen, onset, size)))
         return draw(keys)

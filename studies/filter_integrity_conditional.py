@@ -155,6 +155,28 @@ def on_runs(parts):
                    "worst": float(worst.max())}
 
 
+def fault_size_range(p, scen):
+    """(lo, hi) of a faulted scenario's log-uniform size: the study's ``step_m`` (m) for
+    'step', ``ramp_m_s`` (m/s) for 'ramp' (validated 'lo,hi' strings)."""
+    return tuple(float(x) for x in (p["step_m"] if scen == "step" else p["ramp_m_s"]).split(","))
+
+
+def _importance_how(n, drawn, est, plain):
+    """The note's words for an importance-sampled estimate ``est`` over ``n`` draws of
+    ``drawn`` (which tuple, which member importance sampled), beside the plain estimate
+    ``plain`` on the study's runs (stored in ``est['on_runs']``)."""
+    est["on_runs"] = plain
+    return (f"{n} draws of {drawn} importance sampled (ESS {est['ess']:.3g}), the magnitude "
+            f"by {MAGNITUDE_NODES}-node quadrature; on the study's {plain['draws']} runs "
+            f"{plain['rate']:.2g} (+- {plain['std_error']:.2g})")
+
+
+def _rows_result(rows, per):
+    """(rows, metrics) of one platform: the scenarios' entries, ``passed`` when none failed."""
+    return rows, {"scenarios": per, "passed": not any(d["failed"] for d in per.values()),
+                  "hpl_fraction": HPL_FRACTION}
+
+
 def summary_row(scen, platform, est, alloc, validation, how):
     """(row, metrics entry) of one scenario's conditional estimate beside the crude check:
     ``est`` the estimate's dict, ``validation`` the ``araim.filter_risk.crude_check`` of the
@@ -193,19 +215,12 @@ def drive_rows(case: DriveCase, validation, p, n, seed, onset_s, budget):
             how = f"exact given each run's covariances, over {plain['draws']} runs"
         else:
             alloc = budget.phmi_h / p["p_s"]
-            size = tuple(float(x) for x in (p["step_m"] if scen == "step"
-                                            else p["ramp_m_s"]).split(","))
-            est = drive_importance_risk(case, scen, onset_s, size, n,
+            est = drive_importance_risk(case, scen, onset_s, fault_size_range(p, scen), n,
                                         mc.realization_keys(seed, COND_CELL + si, 0, 1)[0])
-            est["on_runs"] = plain
-            how = (f"{n} draws of (run, tower, onset), the tower importance sampled (ESS "
-                   f"{est['ess']:.3g}), the magnitude by {MAGNITUDE_NODES}-node quadrature; "
-                   f"on the study's {plain['draws']} runs {plain['rate']:.2g} "
-                   f"(+- {plain['std_error']:.2g})")
+            how = _importance_how(n, "(run, tower, onset), the tower", est, plain)
         row, per[scen] = summary_row(scen, "seed 000 drive", est, alloc, v, how)
         rows.append(row)
-    return rows, {"scenarios": per, "passed": not any(d["failed"] for d in per.values()),
-                  "hpl_fraction": HPL_FRACTION}
+    return _rows_result(rows, per)
 
 
 @functools.cache
@@ -235,19 +250,13 @@ def uav_rows(setup, validation, p, n, seed, onset_s, budget):
             how = "exact given the model (the linear bank's covariances are the same every run)"
         else:
             alloc = budget.phmi_h / float(np.max(setup.p_s[cand]))
-            size = tuple(float(x) for x in (p["step_m"] if scen == "step"
-                                            else p["ramp_m_s"]).split(","))
-            est = filter_mc.importance_risk(setup, scen, onset_s, size, n, mc.realization_keys(
-                seed, COND_CELL + 10 + si, 0, 1)[0])
-            est["on_runs"] = plain
-            how = (f"{n} draws of (source, onset), the source importance sampled (ESS "
-                   f"{est['ess']:.3g}), the magnitude by {MAGNITUDE_NODES}-node "
-                   f"quadrature; on the study's {plain['draws']} runs {plain['rate']:.2g} "
-                   f"(+- {plain['std_error']:.2g})")
+            est = filter_mc.importance_risk(setup, scen, onset_s, fault_size_range(p, scen), n,
+                                            mc.realization_keys(seed, COND_CELL + 10 + si, 0,
+                                                                1)[0])
+            how = _importance_how(n, "(source, onset), the source", est, plain)
         row, per[scen] = summary_row(scen, "UAV flight (seed 004)", est, alloc, v, how)
         rows.append(row)
-    return rows, {"scenarios": per, "passed": not any(d["failed"] for d in per.values()),
-                  "hpl_fraction": HPL_FRACTION}
+    return _rows_result(rows, per)
 
 
 def check_row(passed):
